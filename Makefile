@@ -1,0 +1,22 @@
+# dmg-cell: `make demo` sets everything up and runs the main job; `make test` sets up and tests.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+DMG := $(VENV)/bin/dmg
+export MUJOCO_GL ?= egl
+
+.PHONY: setup demo test bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	$(DMG) demo
+
+test: setup
+	$(PY) -m pytest
+
+bench: setup
+	$(DMG) graph bench --json -o out/bench_graph.json
+
+clean:
+	rm -rf build out

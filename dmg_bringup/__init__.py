@@ -1,0 +1,1 @@
+"""Bring-up of the DMG cell: the `dmg` CLI, the node launcher, bag tools and the install layout."""

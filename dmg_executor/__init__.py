@@ -1,0 +1,1 @@
+"""ECTS dual-arm execution of a repositioning plan, closed loop on vision."""

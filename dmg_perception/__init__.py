@@ -1,0 +1,1 @@
+"""Object-in-gripper pose from AprilTags on the wrist camera."""

@@ -1,0 +1,1 @@
+"""MuJoCo dual-arm cell standing in for the Baxter and its wrist camera."""

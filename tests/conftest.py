@@ -1,0 +1,67 @@
+"""Shared test set-up: an isolated DDS domain per test process, and process helpers."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+# Each pytest process gets its own ROS domain and stays on this host, so parallel runs
+# (and other ROS users on the network) never see each other's nodes.
+os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100)
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+from dmg_bringup.environment import apply_ros_environment  # noqa: E402
+
+apply_ros_environment()
+
+REPO = Path(__file__).resolve().parent.parent
+HELPERS = Path(__file__).resolve().parent / "helpers"
+DMG = str(Path(sys.prefix) / "bin" / "dmg")
+
+
+def dmg(*args: str, timeout: float = 60.0, **kwargs) -> subprocess.CompletedProcess:
+    """Run the `dmg` CLI as a separate process and capture its output."""
+    return subprocess.run([DMG, *args], capture_output=True, text=True, timeout=timeout, **kwargs)
+
+
+def helper_command(script: str, *args: str) -> list[str]:
+    return [sys.executable, str(HELPERS / script), *args]
+
+
+class Processes:
+    """Background processes of one test, stopped (and reaped) when the test ends."""
+
+    def __init__(self) -> None:
+        self.started: list[subprocess.Popen] = []
+
+    def start(self, command: list[str], **kwargs) -> subprocess.Popen:
+        kwargs.setdefault("stdout", subprocess.PIPE)
+        kwargs.setdefault("stderr", subprocess.PIPE)
+        process = subprocess.Popen(command, text=True, start_new_session=True, **kwargs)
+        self.started.append(process)
+        return process
+
+    def stop_all(self) -> None:
+        for process in self.started:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+        deadline = time.monotonic() + 10
+        for process in self.started:
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+
+
+@pytest.fixture
+def processes() -> Iterator[Processes]:
+    procs = Processes()
+    yield procs
+    procs.stop_all()
