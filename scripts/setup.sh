@@ -72,14 +72,16 @@ schema_digest=$(digest msg_schemas)
 if changed interfaces "$schema_digest" || ! "$vpy" -c 'import dmg_interfaces.srv' 2>/dev/null; then
   log "building dmg_interfaces"
   build="$repo/build/dmg_interfaces"
+  build_log="$repo/build/dmg_interfaces.log"
   rm -rf "$build"
+  mkdir -p "$build"
   (
     export AMENT_PREFIX_PATH="$venv" CMAKE_PREFIX_PATH="$venv" PATH="$venv/bin:$PATH"
     cmake -S "$repo/msg_schemas" -B "$build" -DCMAKE_INSTALL_PREFIX="$venv" \
-      -DPython3_EXECUTABLE="$vpy" -DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE=Release >"$build.log" 2>&1 \
-    && cmake --build "$build" -j"$(nproc)" >>"$build.log" 2>&1 \
-    && cmake --install "$build" >>"$build.log" 2>&1
-  ) || { log "building dmg_interfaces failed; the log is $build.log:" >&2; tail -40 "$build.log" >&2; exit 1; }
+      -DPython3_EXECUTABLE="$vpy" -DBUILD_TESTING=OFF -DCMAKE_BUILD_TYPE=Release >"$build_log" 2>&1 \
+    && cmake --build "$build" -j"$(nproc)" >>"$build_log" 2>&1 \
+    && cmake --install "$build" >>"$build_log" 2>&1
+  ) || { log "building dmg_interfaces failed; the log is $build_log:" >&2; tail -40 "$build_log" >&2; exit 1; }
   "$vpy" -c 'import dmg_interfaces.srv, dmg_interfaces.action, dmg_interfaces.msg'
   stamp interfaces "$schema_digest"
 fi
