@@ -77,6 +77,15 @@ def test_load_object_round_trip(servers):
     assert echoed["parameters"]["voxel_resolution"] == 0.0  # unset = planner default
 
 
+def test_reset_scene_round_trip(servers):
+    request = {"object_id": "plug", "grip_force": 12.5,
+               "object_in_gripper": {"position": {"x": 0.0, "y": 0.01, "z": 0.03},
+                                     "orientation": {"x": 1.0, "y": 0.0, "z": 0.0, "w": 0.0}}}
+    result = dmg("service", "call", "/reset", "dmg_interfaces/srv/ResetScene", json.dumps(request))
+    assert result.returncode == 0, result.stderr
+    assert _message_json(result.stdout) == request
+
+
 def test_execute_repositioning_action_round_trip(servers):
     primitive = {"kind": 1, "translation": {"x": 0.01, "y": 0.0, "z": 0.0},
                  "contact_before": {"x": 0.05}, "contact_after": {"x": 0.06},
@@ -98,6 +107,16 @@ def test_execute_repositioning_action_round_trip(servers):
     assert echoed["plan"]["primitives"][1]["angle"] == -0.5
     assert echoed["plan"]["primitives"][0]["contact_after"] == {"x": 0.06, "y": 0.0, "z": 0.0}
     assert echoed["plan"]["finger_angles"] == [1.0, 0.5]
+
+
+def test_gripper_command_over_a_topic(processes):
+    processes.start([DMG, "topic", "pub", "/arm1/gripper/command", "dmg_interfaces/msg/GripperCommand",
+                     "{header: {frame_id: arm1_gripper}, opening: 0.045, max_force: 3}", "-r", "5"])
+    result = dmg("topic", "echo", "/arm1/gripper/command", "dmg_interfaces/msg/GripperCommand", "--once",
+                 "--json", "--timeout", "20")
+    assert result.returncode == 0, result.stderr
+    echoed = json.loads(result.stdout.splitlines()[0])
+    assert (echoed["header"]["frame_id"], echoed["opening"], echoed["max_force"]) == ("arm1_gripper", 0.045, 3.0)
 
 
 def test_plan_message_over_a_topic(processes):

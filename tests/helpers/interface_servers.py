@@ -1,4 +1,4 @@
-"""Serve PlanRepositioning, LoadObject and ExecuteRepositioning by echoing what arrived.
+"""Serve PlanRepositioning, LoadObject, ResetScene and ExecuteRepositioning by echoing what arrived.
 
 Every reply carries the request/goal as JSON in its `message`, so a client in another
 process can check that each field crossed DDS intact; the action also sends one feedback
@@ -13,7 +13,7 @@ from rclpy.executors import MultiThreadedExecutor
 
 from dmg_bringup.messages import to_plain
 from dmg_interfaces.action import ExecuteRepositioning
-from dmg_interfaces.srv import LoadObject, PlanRepositioning
+from dmg_interfaces.srv import LoadObject, PlanRepositioning, ResetScene
 
 
 def plan(request, response):
@@ -30,6 +30,13 @@ def load(request, response):
     response.success = True
     response.message = json.dumps(to_plain(request))
     response.statistics.cache_key = request.mesh_path
+    return response
+
+
+def reset(request, response):
+    response.success = True
+    response.message = json.dumps(to_plain(request))
+    response.object_in_gripper = request.object_in_gripper
     return response
 
 
@@ -50,6 +57,7 @@ rclpy.init()
 node = rclpy.create_node("interface_servers")
 node.create_service(PlanRepositioning, "/plan", plan)
 node.create_service(LoadObject, "/load", load)
+node.create_service(ResetScene, "/reset", reset)
 ActionServer(node, ExecuteRepositioning, "/execute", execute)
 print("serving", flush=True)
 try:
