@@ -89,7 +89,7 @@ class Launcher:
         self.specs = specs
         self.grace = grace
         self.processes: dict[str, subprocess.Popen] = {}
-        self.param_dir = tempfile.TemporaryDirectory(prefix="dmg_up_")
+        self.param_dir = tempfile.TemporaryDirectory(prefix="dmg_up_") if any(s.parameters for s in specs) else None
         self.stopping = threading.Event()
         self.width = max(len(s.name) for s in specs)
 
@@ -154,7 +154,8 @@ class Launcher:
                 time.sleep(0.05)
         for name, process in self.processes.items():
             print(f"[dmg up] {name} exited with {process.wait()}", flush=True)
-        self.param_dir.cleanup()
+        if self.param_dir is not None:
+            self.param_dir.cleanup()
 
 
 def up(args: argparse.Namespace) -> int:
