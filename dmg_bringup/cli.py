@@ -9,7 +9,7 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import bag, launcher, ros_verbs
+from dmg_bringup import bag, demo, graph_cli, launcher, ros_verbs
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -39,6 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     ros_verbs.register(subparsers)
     bag.register(subparsers)
     launcher.register(subparsers)
+    graph_cli.register(subparsers)
+    demo.register(subparsers)
     return parser
 
 

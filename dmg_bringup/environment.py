@@ -12,9 +12,7 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
-def config_dir() -> Path:
-    """The project's config/ directory (override with DMG_CONFIG_DIR)."""
-    return Path(os.environ.get("DMG_CONFIG_DIR", REPO_ROOT / "config"))
+from dmg_planner.objects import config_dir  # noqa: E402 - one definition of where config/ is
 
 
 def fastdds_profile() -> Path:

@@ -1,0 +1,150 @@
+"""The shipped test objects: metadata under config/objects/<name>/object.yaml.
+
+Each object is described as a union of axis-aligned boxes (`parts`, metres, object frame).
+That one description gives the planner an exact watertight mesh (mesh.stl, written by
+`python -m dmg_planner.objects`), the simulator exact collision geoms, and the perception
+node the faces its AprilTags sit on.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+
+def config_dir() -> Path:
+    """config/ of this checkout, or DMG_CONFIG_DIR (kept ROS-free on purpose)."""
+    return Path(os.environ.get("DMG_CONFIG_DIR", Path(__file__).resolve().parent.parent / "config"))
+
+
+@dataclass
+class Box:
+    center: np.ndarray
+    size: np.ndarray
+
+
+@dataclass
+class AprilTag:
+    id: int
+    size: float            # black square edge length [m]
+    position: np.ndarray   # tag centre on the surface, object frame [m]
+    rpy_deg: np.ndarray    # tag frame (z out of the surface) in the object frame, xyz Euler [deg]
+
+
+@dataclass
+class ObjectModel:
+    name: str
+    directory: Path
+    mesh_file: str
+    units: str
+    mass: float
+    seed_resolution: float
+    parts: list[Box]
+    apriltags: list[AprilTag] = field(default_factory=list)
+    description: str = ""
+
+    @property
+    def mesh_path(self) -> Path:
+        return self.directory / self.mesh_file
+
+    def load_shape(self, spacing: float = 0.001):
+        """The object's Shape (dmg_planner.shape, imported here: it needs open3d)."""
+        from dmg_planner.shape import load_shape
+
+        return load_shape(self.mesh_path, self.units, spacing)
+
+
+def object_names() -> list[str]:
+    root = config_dir() / "objects"
+    return sorted(p.parent.name for p in root.glob("*/object.yaml"))
+
+
+def load_object(name: str) -> ObjectModel:
+    path = config_dir() / "objects" / name / "object.yaml"
+    if not path.is_file():
+        raise KeyError(f"unknown object {name!r}: known objects are {', '.join(object_names())}")
+    doc = yaml.safe_load(path.read_text())
+    return ObjectModel(
+        name=name, directory=path.parent, mesh_file=doc["mesh"], units=doc.get("units", "m"),
+        mass=float(doc["mass"]), seed_resolution=float(doc["seed_resolution"]),
+        description=doc.get("description", ""),
+        parts=[Box(np.asarray(p["center"], float), np.asarray(p["size"], float)) for p in doc["parts"]],
+        apriltags=[AprilTag(int(t["id"]), float(t["size"]), np.asarray(t["position"], float),
+                            np.asarray(t["rpy_deg"], float)) for t in doc.get("apriltags", [])],
+    )
+
+
+def box_union_mesh(parts: list[Box]) -> tuple[np.ndarray, np.ndarray]:
+    """Watertight triangle mesh of a union of axis-aligned boxes.
+
+    The boxes are cut along every box face coordinate into a grid of cells; the surface is
+    every cell face between a solid and an empty cell. All faces share the grid's vertices,
+    so the mesh has no T-junctions. Returns (vertices, triangles) wound outward.
+    """
+    lows = np.array([p.center - p.size / 2 for p in parts])
+    highs = np.array([p.center + p.size / 2 for p in parts])
+    coords = [np.unique(np.concatenate([lows[:, k], highs[:, k]])) for k in range(3)]
+    mids = [(c[:-1] + c[1:]) / 2 for c in coords]
+    grid = np.stack(np.meshgrid(*mids, indexing="ij"), axis=-1)
+    solid = np.zeros(grid.shape[:3], bool)
+    for low, high in zip(lows, highs):
+        solid |= np.all((grid > low) & (grid < high), axis=-1)
+    padded = np.pad(solid, 1)
+    vertex_index: dict[tuple[int, int, int], int] = {}
+    triangles = []
+
+    def vid(i: int, j: int, k: int) -> int:
+        return vertex_index.setdefault((i, j, k), len(vertex_index))
+
+    for axis in range(3):
+        step = np.zeros(3, int)
+        step[axis] = 1
+        other = [a for a in range(3) if a != axis]
+        # Faces between cell c-1 and c along `axis` (padded indices); sign = +1 when the solid is below.
+        below = padded[tuple(slice(0, -1) if a == axis else slice(1, -1) for a in range(3))]
+        above = padded[tuple(slice(1, None) if a == axis else slice(1, -1) for a in range(3))]
+        for sign, mask in ((1, below & ~above), (-1, above & ~below)):
+            for face in np.argwhere(mask):
+                corner = face.copy()
+                quad = []
+                for du, dv in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    c = corner.copy()
+                    c[other[0]] += du
+                    c[other[1]] += dv
+                    quad.append(vid(*c))
+                # (other0, other1, axis) is right-handed for axis 0 and 2 and for axis 1 reversed.
+                outward = sign if axis != 1 else -sign
+                if outward < 0:
+                    quad = quad[::-1]
+                triangles += [[quad[0], quad[1], quad[2]], [quad[0], quad[2], quad[3]]]
+    grid_vertices = np.array(list(vertex_index.keys()))
+    vertices = np.stack([coords[k][grid_vertices[:, k]] for k in range(3)], axis=1)
+    return vertices, np.array(triangles, dtype=np.int64)
+
+
+def write_mesh(model: ObjectModel) -> Path:
+    import open3d as o3d
+
+    vertices, triangles = box_union_mesh(model.parts)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    mesh.compute_triangle_normals()
+    if not o3d.io.write_triangle_mesh(str(model.mesh_path), mesh, write_ascii=False):
+        raise OSError(f"could not write {model.mesh_path}")
+    return model.mesh_path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Regenerate the shipped objects' meshes from their box parts.")
+    parser.add_argument("names", nargs="*", help="objects to regenerate (default: all)")
+    args = parser.parse_args(argv)
+    for name in args.names or object_names():
+        print(write_mesh(load_object(name)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

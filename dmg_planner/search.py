@@ -1,0 +1,505 @@
+"""Planning an in-hand repositioning on a DMG (paper section IV-B).
+
+Gripper frame (also in PlanRepositioning.srv): x is the grasp axis from finger 0 to
+finger 1, z points from the palm along the fingers; finger 0 sits at -x * opening/2, finger
+1 at +x * opening/2. A finger's angle names the direction -z (from the contact towards the
+palm) in the contact's tangent frame (see graph.py).
+
+The principal finger's contact moves over the DMG; the secondary finger's contact is where
+the grasp line through the principal contact leaves the object on the other side (the
+gripper keeps its grasp axis through translations and rotations about that axis). The
+search runs Dijkstra (scipy.sparse.csgraph) over states (DMG node, finger angle bin,
+layer) of the principal's C_DMG component:
+  * translation: to an adjacent node at the same angle bin, allowed when both nodes admit
+    it and the secondary finger stays in a node of its start component C_s at that angle;
+    cost = distance * (1 + pull_penalty if the step pulls the object out of the gripper, i.e.
+    the second gripper would have to pull) + opening_change_penalty * |change of opening|;
+  * rotation: entering layer 1 costs rotation_penalty, each angle step inside it costs
+    rotation_penalty * step / pi (so a rotation of r costs rotation_penalty * (1 + |r|/pi)),
+    plus arm_collision_penalty when the finger turns more than 90 deg away from its start
+    direction (the first arm swings towards the side the second arm works from); leaving
+    layer 1 is free. A state whose secondary finger would leave C_s has no edges (cost inf).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from dmg_planner.graph import DexterousManipulationGraph
+from dmg_planner.primitives import Primitive, primitives_from_path
+
+# A translation step "pulls" when it moves the contact towards the palm by more than this
+# fraction of its length (the object then moves out of the gripper, towards the fingertips).
+PULL_COSINE = np.cos(np.deg2rad(80.0))
+# The contact normal at a finger must face that finger to within this angle.
+NORMAL_TOLERANCE = np.deg2rad(45.0)
+# In-hand primitives keep the grasp axis; a goal whose axis differs by more is unreachable.
+AXIS_TOLERANCE = np.deg2rad(15.0)
+QUATERNION_TOLERANCE = 1e-3
+ZERO_COST = 1e-12  # csgraph ignores explicit zero weights; free edges get this instead
+
+
+class PlanStatus(IntEnum):
+    """Same values as the error codes of dmg_interfaces/srv/PlanRepositioning."""
+
+    OK = 0
+    UNKNOWN_OBJECT = 1
+    INVALID_START = 2
+    INVALID_GOAL = 3
+    DIFFERENT_COMPONENTS = 4
+    NO_PATH = 5
+    BAD_REQUEST = 6
+    NOT_READY = 7
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    principal_finger: int = -1          # -1 = try both, keep the cheaper; 0; 1
+    rotation_penalty: float = 0.01
+    opening_change_penalty: float = 1.0
+    pull_penalty: float = 1.0
+    arm_collision_penalty: float = 0.05
+    merge_tolerance: float = 0.0        # 0 = half the graph's seed resolution
+
+    def validate(self) -> None:
+        if self.principal_finger not in (-1, 0, 1):
+            raise ValueError(f"principal_finger must be -1, 0 or 1, not {self.principal_finger}")
+        for name in ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty",
+                     "merge_tolerance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} = {value}: must be finite and >= 0")
+
+
+@dataclass
+class GripperPose:
+    """First gripper's pose in the object frame; opening 0 = derive from the contacts."""
+
+    position: np.ndarray
+    quaternion: np.ndarray   # x, y, z, w
+    opening: float = 0.0
+
+    def validate(self, what: str) -> None:
+        values = np.concatenate([np.ravel(self.position), np.ravel(self.quaternion), [self.opening]])
+        if values.shape != (8,) or not np.all(np.isfinite(values)):
+            raise ValueError(f"{what} pose has non-finite or missing values: {values.tolist()}")
+        norm = float(np.linalg.norm(self.quaternion))
+        if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+            raise ValueError(f"{what} orientation is not a unit quaternion (norm {norm:.6f})")
+        if self.opening < 0:
+            raise ValueError(f"{what} opening {self.opening} is negative")
+
+
+class GraspError(ValueError):
+    """A gripper pose that does not give a valid grasp on the graph; the message says why."""
+
+
+@dataclass
+class Grasp:
+    """A gripper pose resolved on the graph."""
+
+    principal_finger: int
+    contact: np.ndarray            # principal finger contact on the surface
+    secondary: np.ndarray          # secondary finger contact
+    axis: np.ndarray               # unit grasp direction, principal -> secondary
+    finger_direction: np.ndarray   # unit direction from the contacts towards the palm
+    vertex: int
+    node: int
+    angle: float                   # principal finger angle at `vertex`
+    secondary_vertex: int
+    secondary_node: int
+
+    @property
+    def opening(self) -> float:
+        return float(np.linalg.norm(self.secondary - self.contact))
+
+
+@dataclass
+class PlanResult:
+    status: PlanStatus
+    message: str
+    principal_finger: int = -1
+    start_component: int = -1
+    goal_component: int = -1
+    primitives: list[Primitive] = field(default_factory=list)
+    principal_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    secondary_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    finger_angles: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cost: float = float("inf")
+    planning_time: float = 0.0
+    start: Grasp | None = None
+    goal: Grasp | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.status == PlanStatus.OK
+
+
+def _cast(graph: DexterousManipulationGraph, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First hit of each ray: (points, hit mask)."""
+    import open3d as o3d
+
+    rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
+    t_hit = graph.scene().cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+    hit = np.isfinite(t_hit)
+    return origins + np.where(hit, t_hit, 0.0)[:, None] * directions, hit
+
+
+def _reach(graph: DexterousManipulationGraph) -> float:
+    extent = graph.mesh_vertices.max(axis=0) - graph.mesh_vertices.min(axis=0)
+    return 2.0 * float(np.linalg.norm(extent)) + 0.01
+
+
+def secondary_contacts(graph: DexterousManipulationGraph, points: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where grasp lines through `points` along `axis` meet the object on the secondary side.
+
+    The secondary finger comes from outside, so its contact is the first surface point seen
+    from far out along +axis looking back. Returns (points, hit mask).
+    """
+    points = np.atleast_2d(points)
+    reach = _reach(graph) + float(np.max(np.abs(points - graph.mesh_vertices.mean(axis=0)), initial=0.0))
+    directions = np.broadcast_to(-axis, points.shape)
+    return _cast(graph, points + reach * axis, np.ascontiguousarray(directions))
+
+
+class GraspFault(IntEnum):
+    """Why a gripper pose gives no grasp (batch form of GraspError)."""
+
+    NONE = 0
+    MISSES_OBJECT = 1
+    NO_PRINCIPAL_VERTEX = 2
+    PRINCIPAL_ANGLE_BLOCKED = 3
+    NO_SECONDARY_VERTEX = 4
+    SECONDARY_ANGLE_BLOCKED = 5
+
+
+@dataclass
+class GraspBatch:
+    """Many gripper poses resolved at once (arrays indexed by pose)."""
+
+    fault: np.ndarray             # (P,) GraspFault
+    contact: np.ndarray           # (P, 3)
+    secondary: np.ndarray         # (P, 3)
+    axis: np.ndarray              # (P, 3) principal -> secondary
+    finger_direction: np.ndarray  # (P, 3)
+    vertex: np.ndarray            # (P,) principal vertex, -1 when faulty
+    node: np.ndarray
+    angle: np.ndarray
+    secondary_vertex: np.ndarray
+    secondary_node: np.ndarray
+
+
+def _nodes_near(graph: DexterousManipulationGraph, points: np.ndarray, outward: np.ndarray,
+                directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per point: (vertex, node, angle, fault 0/1/2) for a finger touching it, pad facing -outward.
+
+    Candidates are the vertices within a seed resolution whose normal faces the finger; the
+    supervoxel that contains the point is preferred, then the nearest. Fault 1 = no
+    candidate, 2 = candidates exist but none admits the finger's angle.
+    """
+    p = graph.parameters
+    radius = max(p.seed_resolution, 2 * p.voxel_resolution)
+    alive = np.flatnonzero(graph.vertex_component >= 0)
+    count = len(points)
+    vertex, node = np.full(count, -1), np.full(count, -1)
+    angle, fault = np.zeros(count), np.ones(count, int)
+    if len(alive) == 0 or count == 0:
+        return vertex, node, angle, fault
+    if "alive_tree" not in graph._cache:
+        graph._cache["alive_tree"] = cKDTree(graph.positions[alive])
+    lists = graph._cache["alive_tree"].query_ball_point(points, radius)
+    lengths = np.array([len(items) for items in lists])
+    pose = np.repeat(np.arange(count), lengths)
+    candidate = alive[np.concatenate([np.asarray(items, int) for items in lists])] if lengths.sum() else np.zeros(0, int)
+    facing = np.einsum("ij,ij->i", graph.normals[candidate], outward[pose]) >= np.cos(NORMAL_TOLERANCE)
+    pose, candidate = pose[facing], candidate[facing]
+    fault[np.unique(pose)] = 2
+    own = graph.vertex_at(points)
+    cand_angle = graph.angle_of(candidate, directions[pose])
+    table = graph.vertex_nodes()[candidate]
+    ok = (table >= 0) & graph.node_angles[table.clip(min=0), graph.angle_bin(cand_angle)[:, None]]
+    usable = ok.any(axis=1)
+    distance = np.linalg.norm(graph.positions[candidate] - points[pose], axis=1) - 1.0 * (candidate == own[pose])
+    order = np.lexsort((distance, ~usable, pose))
+    first = order[np.r_[True, pose[order][1:] != pose[order][:-1]]] if len(order) else order
+    first = first[usable[first]]
+    chosen = pose[first]
+    vertex[chosen] = candidate[first]
+    node[chosen] = table[first, ok[first].argmax(axis=1)]
+    angle[chosen] = cand_angle[first]
+    fault[chosen] = 0
+    return vertex, node, angle, fault
+
+
+def locate_grasps(graph: DexterousManipulationGraph, positions: np.ndarray, rotations: np.ndarray,
+                  principal_finger: int) -> GraspBatch:
+    """Contacts and DMG nodes of gripper poses (positions (P,3), rotation matrices (P,3,3))."""
+    x, z = rotations[:, :, 0], rotations[:, :, 2]
+    axis = x if principal_finger == 0 else -x
+    finger_direction = -z
+    reach = _reach(graph) + np.linalg.norm(positions - graph.mesh_vertices.mean(axis=0), axis=1, keepdims=True)
+    contact, hit = _cast(graph, positions - reach * axis, np.ascontiguousarray(axis))
+    secondary, _ = _cast(graph, contact + 2 * reach * axis, np.ascontiguousarray(-axis))
+    fault = np.where(hit, GraspFault.NONE, GraspFault.MISSES_OBJECT)
+    vertex, node, angle, bad = _nodes_near(graph, contact, -axis, finger_direction)
+    fault = np.where(fault == 0, np.choose(bad, [GraspFault.NONE, GraspFault.NO_PRINCIPAL_VERTEX,
+                                                 GraspFault.PRINCIPAL_ANGLE_BLOCKED]), fault)
+    secondary_vertex, secondary_node, _, bad = _nodes_near(graph, secondary, axis, finger_direction)
+    fault = np.where(fault == 0, np.choose(bad, [GraspFault.NONE, GraspFault.NO_SECONDARY_VERTEX,
+                                                 GraspFault.SECONDARY_ANGLE_BLOCKED]), fault)
+    return GraspBatch(fault, contact, secondary, axis, finger_direction, vertex, node, angle,
+                      secondary_vertex, secondary_node)
+
+
+def resolve_grasp(graph: DexterousManipulationGraph, pose: GripperPose, principal_finger: int, what: str) -> Grasp:
+    """Contacts and DMG nodes of one gripper pose, or GraspError with the reason."""
+    rotation = Rotation.from_quat(pose.quaternion).as_matrix()
+    batch = locate_grasps(graph, np.asarray(pose.position, float)[None], rotation[None], principal_finger)
+    fault = GraspFault(int(batch.fault[0]))
+    contact, secondary = batch.contact[0], batch.secondary[0]
+    radius = max(graph.parameters.seed_resolution, 2 * graph.parameters.voxel_resolution) * 1000
+    where = {"principal": np.round(contact, 4).tolist(), "secondary": np.round(secondary, 4).tolist()}
+    messages = {
+        GraspFault.MISSES_OBJECT: f"{what} grasp axis through {np.round(pose.position, 4).tolist()} misses the object",
+        GraspFault.NO_PRINCIPAL_VERTEX: f"{what} principal contact {where['principal']} has no graph vertex within "
+                                        f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
+        GraspFault.PRINCIPAL_ANGLE_BLOCKED: f"{what} principal finger at {where['principal']} would collide with "
+                                            f"the object at this finger angle",
+        GraspFault.NO_SECONDARY_VERTEX: f"{what} secondary contact {where['secondary']} has no graph vertex within "
+                                        f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
+        GraspFault.SECONDARY_ANGLE_BLOCKED: f"{what} secondary finger at {where['secondary']} would collide with "
+                                            f"the object at this finger angle",
+    }
+    if fault != GraspFault.NONE:
+        raise GraspError(messages[fault])
+    width = float(np.linalg.norm(secondary - contact))
+    tolerance = max(0.005, graph.parameters.seed_resolution / 2)
+    if pose.opening > 0 and abs(pose.opening - width) > tolerance:
+        raise GraspError(f"{what} opening {pose.opening * 1000:.1f} mm does not match the object's width "
+                         f"{width * 1000:.1f} mm along the grasp axis (tolerance {tolerance * 1000:.1f} mm)")
+    return Grasp(principal_finger, contact, secondary, batch.axis[0], batch.finger_direction[0],
+                 int(batch.vertex[0]), int(batch.node[0]), float(batch.angle[0]),
+                 int(batch.secondary_vertex[0]), int(batch.secondary_node[0]))
+
+
+@dataclass
+class StateGraph:
+    """The search space of one (principal component, grasp axis, secondary component)."""
+
+    nodes: np.ndarray          # (K,) DMG nodes of the principal component
+    valid: np.ndarray          # (K, A) principal angle set and secondary still in C_s
+    secondaries: np.ndarray    # (K, 3) secondary contact when the principal is at the node
+    matrix: sparse.csr_matrix  # (2*K*A)^2 edge costs
+
+    def state(self, node: int, angle_bin: int, layer: int = 0) -> int:
+        k = int(np.searchsorted(self.nodes, node))
+        return (layer * len(self.nodes) + k) * self.valid.shape[1] + angle_bin
+
+    def unpack(self, state: int) -> tuple[int, int, int]:
+        count = self.valid.shape[1]
+        layer, rest = divmod(state, len(self.nodes) * count)
+        k, angle_bin = divmod(rest, count)
+        return layer, int(self.nodes[k]), angle_bin
+
+
+def state_graph(graph: DexterousManipulationGraph, component: int, axis: np.ndarray, secondary_component: int,
+                start_direction: np.ndarray, options: SearchOptions) -> StateGraph:
+    """Build (or fetch from the graph's cache) the search space for one grasp."""
+    key = ("states", component, tuple(np.round(axis, 6)), secondary_component,
+           tuple(np.round(start_direction, 6)), options)
+    cache = graph._cache.setdefault("state_graphs", {})
+    if key not in cache:
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = _build_state_graph(graph, component, axis, secondary_component, start_direction, options)
+    return cache[key]
+
+
+def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: np.ndarray,
+                       secondary_component: int, start_direction: np.ndarray, options: SearchOptions) -> StateGraph:
+    p = graph.parameters
+    count = p.angle_count
+    nodes = np.flatnonzero(graph.node_component == component)
+    vertices = graph.node_vertex[nodes]
+    positions = graph.positions[vertices]
+    secondaries, hit = secondary_contacts(graph, positions, axis)
+    secondary_vertex = graph.vertex_at(secondaries)
+    facing = graph.normals[secondary_vertex.clip(min=0)] @ axis >= np.cos(NORMAL_TOLERANCE)
+    ok_vertex = hit & (secondary_vertex >= 0) & facing
+    # Secondary validity for every (node, angle): its own angle bin must be in a node of C_s.
+    directions = graph.direction(vertices[:, None], graph.angles[None, :])          # (K, A, 3)
+    sv = secondary_vertex.clip(min=0)
+    e1, e2 = graph.references[sv][:, None, :], graph.bitangents[sv][:, None, :]
+    secondary_bins = graph.angle_bin(np.mod(np.arctan2(np.sum(directions * e2, -1), np.sum(directions * e1, -1)), 2 * np.pi))
+    table = graph.vertex_nodes()[sv]                                                  # (K, R)
+    slot_ok = (table >= 0) & (graph.node_component[table.clip(min=0)] == secondary_component)
+    admits = graph.node_angles[table.clip(min=0)[:, :, None], secondary_bins[:, None, :]]  # (K, R, A)
+    secondary_ok = np.any(admits & slot_ok[:, :, None], axis=1) & ok_vertex[:, None]
+    valid = graph.node_angles[nodes] & secondary_ok
+    openings = np.linalg.norm(secondaries - positions, axis=1)
+
+    size = len(nodes) * count
+    index = np.arange(size).reshape(len(nodes), count)
+    rows, cols, costs = [], [], []
+    # Translations along DMG edges inside the component, both directions, same angle bin.
+    edges = graph.node_edges[np.isin(graph.node_edges[:, 0], nodes)]
+    u, v = np.searchsorted(nodes, edges[:, 0]), np.searchsorted(nodes, edges[:, 1])
+    for a, b in ((u, v), (v, u)):
+        both = valid[a] & valid[b]
+        edge_id, angle_bin = np.nonzero(both)
+        step = positions[b[edge_id]] - positions[a[edge_id]]
+        length = np.linalg.norm(step, axis=1)
+        toward_palm = np.einsum("ij,ij->i", step, directions[a[edge_id], angle_bin]) > PULL_COSINE * length
+        rows.append(index[a[edge_id], angle_bin])
+        cols.append(index[b[edge_id], angle_bin])
+        costs.append(length * (1.0 + options.pull_penalty * toward_palm) + ZERO_COST
+                     + options.opening_change_penalty * np.abs(openings[b[edge_id]] - openings[a[edge_id]]))
+    # Rotations: enter layer 1, step one bin either way within the valid set, leave for free.
+    k, angle_bin = np.nonzero(valid)
+    rows += [index[k, angle_bin], size + index[k, angle_bin]]
+    cols += [size + index[k, angle_bin], index[k, angle_bin]]
+    costs += [np.full(len(k), options.rotation_penalty + ZERO_COST), np.full(len(k), ZERO_COST)]
+    ahead = start_direction @ np.moveaxis(directions, -1, 0).reshape(3, -1)
+    ahead = ahead.reshape(len(nodes), count) >= 0
+    for shift in (1, -1):
+        target = (angle_bin + shift) % count
+        ok = valid[k, target]
+        crossing = ahead[k[ok], angle_bin[ok]] & ~ahead[k[ok], target[ok]]
+        rows.append(size + index[k[ok], angle_bin[ok]])
+        cols.append(size + index[k[ok], target[ok]])
+        costs.append(options.rotation_penalty * p.angle_step / np.pi + options.arm_collision_penalty * crossing
+                     + ZERO_COST)
+    matrix = sparse.csr_matrix((np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(2 * size, 2 * size))
+    return StateGraph(nodes=nodes, valid=valid, secondaries=secondaries, matrix=matrix)
+
+
+def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,
+         options: SearchOptions = SearchOptions()) -> PlanResult:
+    """Plan from `start` to `goal`; failures come back as a PlanResult with a status, never raised."""
+    began = time.perf_counter()
+    try:
+        options.validate()
+        start.validate("start")
+        goal.validate("goal")
+    except ValueError as error:
+        return PlanResult(PlanStatus.BAD_REQUEST, str(error), planning_time=time.perf_counter() - began)
+    fingers = (0, 1) if options.principal_finger < 0 else (options.principal_finger,)
+    results = [_plan_with(graph, start, goal, options, finger) for finger in fingers]
+    successes = [r for r in results if r.success]
+    result = min(successes, key=lambda r: r.cost) if successes else results[0]
+    if not successes and len(results) > 1 and results[1].message != results[0].message:
+        result = replace(result, message=f"{results[0].message} (with finger 1 leading: {results[1].message})")
+    result.planning_time = time.perf_counter() - began
+    return result
+
+
+def _plan_with(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,
+               options: SearchOptions, finger: int) -> PlanResult:
+    try:
+        s = resolve_grasp(graph, start, finger, "start")
+    except GraspError as error:
+        return PlanResult(PlanStatus.INVALID_START, str(error), finger)
+    try:
+        g = resolve_grasp(graph, goal, finger, "goal")
+    except GraspError as error:
+        return PlanResult(PlanStatus.INVALID_GOAL, str(error), finger, int(graph.node_component[s.node]), start=s)
+    components = [int(graph.node_component[n]) for n in (s.node, g.node, s.secondary_node, g.secondary_node)]
+    base = dict(principal_finger=finger, start_component=components[0], goal_component=components[1], start=s, goal=g)
+    if components[0] != components[1] or components[2] != components[3]:
+        which = "principal" if components[0] != components[1] else "secondary"
+        return PlanResult(PlanStatus.DIFFERENT_COMPONENTS,
+                          f"needs regrasp: the {which} finger (finger {finger if which == 'principal' else 1 - finger}) "
+                          f"starts in DMG component {components[0 if which == 'principal' else 2]} and must end in "
+                          f"component {components[1 if which == 'principal' else 3]}; no in-hand path joins them", **base)
+    axis_change = float(np.arccos(np.clip(s.axis @ g.axis, -1.0, 1.0)))
+    if axis_change > AXIS_TOLERANCE:
+        return PlanResult(PlanStatus.NO_PATH, f"the goal's grasp axis is {np.rad2deg(axis_change):.1f} deg from the "
+                          f"start's; in-hand rotations and translations keep the grasp axis", **base)
+    states = state_graph(graph, components[0], s.axis, components[2], s.finger_direction, options)
+    start_state = states.state(s.node, int(graph.angle_bin(s.angle)))
+    goal_bin = int(graph.angle_bin(g.angle))
+    if not states.valid[np.searchsorted(states.nodes, g.node), goal_bin]:
+        return PlanResult(PlanStatus.NO_PATH, "at the goal contact the secondary finger would leave its start "
+                          f"component {components[2]} (keeping the start's grasp axis)", **base)
+    goal_state = states.state(g.node, goal_bin)
+    if not states.valid[np.searchsorted(states.nodes, s.node), int(graph.angle_bin(s.angle))]:
+        return PlanResult(PlanStatus.INVALID_START, "seen from the start contact's supervoxel centre the secondary "
+                          f"finger falls outside its component {components[2]}: move the start grasp off the "
+                          "boundary", **base)
+    matrix = states.matrix
+    distance, predecessors = dijkstra(matrix, directed=True, indices=start_state, return_predecessors=True)
+    if not np.isfinite(distance[goal_state]):
+        return PlanResult(PlanStatus.NO_PATH, f"no path in component {components[0]} keeps the secondary finger "
+                          f"in component {components[2]}", **base)
+    path = [goal_state]
+    while path[-1] != start_state:
+        path.append(int(predecessors[path[-1]]))
+    return _result_from_path(graph, states, path[::-1], float(distance[goal_state]), options, base)
+
+
+def _result_from_path(graph: DexterousManipulationGraph, states: StateGraph, path: list[int], cost: float,
+                      options: SearchOptions, base: dict) -> PlanResult:
+    s, g = base["start"], base["goal"]
+    decoded = [states.unpack(state) for state in path]
+    # Layer changes are bookkeeping: keep one state per (node, angle) change.
+    sequence = [(node, angle_bin) for _, node, angle_bin in decoded]
+    sequence = [item for i, item in enumerate(sequence) if i == 0 or item != sequence[i - 1]]
+    nodes = np.array([node for node, _ in sequence])
+    angles = np.array([angle_bin for _, angle_bin in sequence]) * graph.parameters.angle_step
+    contacts = graph.positions[graph.node_vertex[nodes]].copy()
+    secondaries = states.secondaries[np.searchsorted(states.nodes, nodes)].copy()
+    # The ends are the measured contacts, not the supervoxel centroids.
+    lead = np.argmax(nodes != nodes[0]) if np.any(nodes != nodes[0]) else len(nodes)
+    trail = len(nodes) - (np.argmax(nodes[::-1] != nodes[-1]) if np.any(nodes != nodes[-1]) else len(nodes))
+    if s.node == g.node and trail == 0:
+        contacts = np.vstack([contacts, contacts[-1]])
+        secondaries = np.vstack([secondaries, secondaries[-1]])
+        angles = np.append(angles, angles[-1])
+        trail = len(contacts) - 1
+    contacts[:lead], secondaries[:lead] = s.contact, s.secondary
+    contacts[trail:], secondaries[trail:] = g.contact, g.secondary
+    start_bin = angles[0]
+    unturned = np.cumprod(angles == start_bin).astype(bool)
+    angles[unturned] = s.angle
+    tolerance = options.merge_tolerance or graph.parameters.seed_resolution / 2
+    primitives = primitives_from_path(contacts, secondaries, angles, g.angle, tolerance)
+    keep = np.ones(len(contacts), bool)
+    keep[1:] = np.any(np.diff(contacts, axis=0) != 0, axis=1) | (np.diff(angles) != 0)
+    return PlanResult(PlanStatus.OK, f"{len(primitives)} primitives, cost {cost:.4f}", primitives=primitives,
+                      principal_path=contacts[keep], secondary_path=secondaries[keep], finger_angles=angles[keep],
+                      cost=cost, **base)
+
+
+def grasp_pose(graph: DexterousManipulationGraph, point: np.ndarray, angle: float, principal_finger: int = 0) -> GripperPose:
+    """The gripper pose that puts the principal finger on the surface at `point` with finger angle `angle`.
+
+    The grasp axis is the contact's inward normal, the gripper sits midway between the
+    contacts and its opening is their distance. Raises GraspError when `point` is not near
+    a vertex of the graph.
+    """
+    point = np.asarray(point, float)
+    alive = np.flatnonzero(graph.vertex_component >= 0)
+    if len(alive) == 0:
+        raise GraspError("the graph has no vertices")
+    vertex = alive[np.argmin(np.linalg.norm(graph.positions[alive] - point, axis=1))]
+    if np.linalg.norm(graph.positions[vertex] - point) > 2 * graph.parameters.seed_resolution:
+        raise GraspError(f"{np.round(point, 4).tolist()} is not on the object's graph (nearest vertex "
+                         f"{np.linalg.norm(graph.positions[vertex] - point) * 1000:.1f} mm away)")
+    axis = -graph.normals[vertex]
+    # Put the point onto the surface along the normal line through it.
+    secondary, hit = secondary_contacts(graph, point[None], axis)
+    contact, _ = _cast(graph, (secondary[0] - _reach(graph) * axis)[None], axis[None])
+    finger_direction = graph.direction(np.array([vertex]), np.array([angle]))[0]
+    x = axis if principal_finger == 0 else -axis
+    z = -finger_direction
+    rotation = np.column_stack([x, np.cross(z, x), z])
+    middle = (contact[0] + secondary[0]) / 2
+    return GripperPose(middle, Rotation.from_matrix(rotation).as_quat(), float(np.linalg.norm(secondary[0] - contact[0])))

@@ -1,0 +1,259 @@
+"""The DMG core against geometry worked out by hand: real meshes, real open3d ray casting."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dmg_planner.graph import GraphParameters, build_graph
+from dmg_planner.manipulability import manipulability_matrix, save_matrix
+from dmg_planner.objects import load_object
+from dmg_planner.primitives import PrimitiveKind
+from dmg_planner.search import GripperPose, PlanStatus, SearchOptions, grasp_pose, plan
+from dmg_planner.storage import cache_key, load_graph, save_graph
+from scipy.spatial.transform import Rotation
+
+
+def build(name: str, **overrides):
+    model = load_object(name)
+    parameters = GraphParameters(seed_resolution=model.seed_resolution, **overrides)
+    return build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+
+
+@pytest.fixture(scope="module")
+def box():
+    return build("box")
+
+
+@pytest.fixture(scope="module")
+def plug():
+    return build("plug")
+
+
+@pytest.fixture(scope="module")
+def bracket():
+    return build("bracket")
+
+
+def rectangles_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Separating-axis test for two convex polygons given as (4, 2) corner arrays."""
+    for polygon in (a, b):
+        for i in range(len(polygon)):
+            edge = polygon[(i + 1) % len(polygon)] - polygon[i]
+            normal = np.array([-edge[1], edge[0]])
+            pa, pb = a @ normal, b @ normal
+            if pa.max() < pb.min() or pb.max() < pa.min():
+                return False
+    return True
+
+
+def finger_footprint(contact: np.ndarray, direction: np.ndarray, length: float, width: float) -> np.ndarray:
+    side = np.array([-direction[1], direction[0]])
+    return np.array([contact + side * width / 2, contact + direction * length + side * width / 2,
+                     contact + direction * length - side * width / 2, contact - side * width / 2])
+
+
+def expected_blocked(graph, vertex: int, plane_axes: tuple[int, int], obstacles: list[np.ndarray]):
+    """Per finger angle: True/False where the 2-D geometry is unambiguous, None near a boundary.
+
+    The finger's footprint in the face plane against the obstacles' footprints (obstacles
+    taller than the finger). Near the boundary (footprint grown or shrunk by a ray spacing
+    changes the answer) the ray model may differ by construction, so no claim there.
+    """
+    p = graph.parameters
+    u, v = plane_axes
+    contact = graph.positions[vertex][[u, v]]
+    answers = []
+    for angle in graph.angles:
+        d3 = graph.direction(np.array([vertex]), np.array([angle]))[0]
+        d = d3[[u, v]] / np.linalg.norm(d3[[u, v]])
+        margin = p.ray_spacing
+        results = set()
+        for grow in (-margin, 0.0, margin):
+            footprint = finger_footprint(contact - d * max(grow, 0.0), d, p.finger_length + 2 * grow,
+                                         p.finger_width + 2 * grow)
+            results.add(any(rectangles_overlap(footprint, obstacle) for obstacle in obstacles))
+        answers.append(results.pop() if len(results) == 1 else None)
+    return answers
+
+
+def rectangle(low_u: float, high_u: float, low_v: float, high_v: float) -> np.ndarray:
+    return np.array([[low_u, low_v], [high_u, low_v], [high_u, high_v], [low_u, high_v]])
+
+
+def test_box_has_one_component_per_face_and_full_angle_sets(box):
+    alive = box.vertex_component >= 0
+    assert alive.all(), "no box vertex should be dropped"
+    assert box.admissible[alive].all(), "a finger on a box face is free in every direction"
+    assert box.component_count == 6
+    assert len(box.node_vertex) == len(box.positions), "one angular component (one node) per vertex"
+    face_normals = np.round(box.normals).astype(int)
+    assert np.allclose(box.normals, face_normals, atol=1e-6), "vertex normals are the face normals"
+    for component in range(6):
+        members = box.node_component == component
+        normals = {tuple(n) for n in face_normals[box.node_vertex[members]]}
+        assert len(normals) == 1, f"component {component} spans faces {normals}"
+    assert len({tuple(n) for n in face_normals}) == 6
+
+
+def test_bracket_wall_blocks_a_long_finger_exactly_where_geometry_says(bracket):
+    top = np.flatnonzero((np.abs(bracket.normals[:, 2] - 1) < 1e-6) & (np.abs(bracket.positions[:, 2] - 0.008) < 1e-6)
+                         & (bracket.vertex_component >= 0))
+    assert len(top) > 20
+    wall = rectangle(0.052, 0.060, -0.030, 0.030)
+    checked = blocked_somewhere = 0
+    for vertex in top:
+        expected = expected_blocked(bracket, vertex, (0, 1), [wall])
+        for angle_index, answer in enumerate(expected):
+            if answer is None:
+                continue
+            checked += 1
+            blocked_somewhere += answer
+            assert bracket.admissible[vertex, angle_index] == (not answer), (
+                f"vertex at {bracket.positions[vertex]} angle {np.rad2deg(bracket.angles[angle_index])}: "
+                f"expected {'blocked' if answer else 'free'}")
+    assert checked > 0.8 * len(top) * bracket.parameters.angle_count
+    assert blocked_somewhere > 0.2 * checked, "the 100 mm finger reaches the wall from most of the plate"
+
+
+def test_plug_has_two_angular_components_between_the_prongs(plug):
+    front = np.flatnonzero((np.abs(plug.normals[:, 0] - 1) < 1e-6) & (np.abs(plug.positions[:, 0] - 0.025) < 1e-6)
+                           & (plug.vertex_component >= 0))
+    between = front[(np.abs(plug.positions[front, 1]) < 0.008) & (np.abs(plug.positions[front, 2]) < 0.012)]
+    assert len(between) >= 2
+    prongs = [rectangle(0.016, 0.020, -0.008, 0.008), rectangle(-0.020, -0.016, -0.008, 0.008)]
+    table = plug.vertex_nodes()
+    for vertex in between:
+        nodes = table[vertex][table[vertex] >= 0]
+        assert len(nodes) == 2, f"vertex {plug.positions[vertex]} has {len(nodes)} angular components"
+        # One run holds +z, the other -z: the finger fits only along the prongs' gap.
+        bins = [plug.angle_bin(plug.angle_of(np.array([vertex]), np.array([d]))[0]) for d in ((0, 0, 1), (0, 0, -1))]
+        holders = [set(np.flatnonzero(plug.node_angles[nodes, b])) for b in bins]
+        assert holders[0] and holders[1] and holders[0] != holders[1]
+        for angle_index, answer in enumerate(expected_blocked(plug, vertex, (1, 2), prongs)):
+            if answer is not None:
+                assert plug.admissible[vertex, angle_index] == (not answer)
+    far = front[np.abs(plug.positions[front, 1]) > 0.024]
+    assert all(len(table[v][table[v] >= 0]) <= 1 for v in far), "away from the prongs there is one run at most"
+
+
+def test_one_face_plan_is_one_straight_merged_translation_with_valid_secondary(box):
+    # The finger points away from the motion (towards the palm is -motion): a push, no pull penalty.
+    vertex = box.vertex_at(np.array([-0.03, -0.01, 0.02]))
+    angle = box.angle_of(vertex, -np.array([[0.06, 0.025, 0.0]]) / np.hypot(0.06, 0.025))[0]
+    start = grasp_pose(box, [-0.03, -0.01, 0.02], angle)
+    goal = grasp_pose(box, [0.03, 0.015, 0.02], angle)
+    result = plan(box, start, goal, SearchOptions(principal_finger=0))
+    assert result.status == PlanStatus.OK, result.message
+    assert [p.kind for p in result.primitives] == [PrimitiveKind.TRANSLATION]
+    assert np.allclose(result.primitives[0].translation, [0.06, 0.025, 0.0], atol=1e-6)
+    assert len(result.principal_path) > 2, "the search went through several supervoxels before merging"
+    # Opposite faces have parallel normals: the secondary finger stays on the bottom face, opposite the principal.
+    assert np.allclose(result.secondary_path[:, 2], -0.02, atol=1e-6)
+    assert np.allclose(result.secondary_path[:, :2], result.principal_path[:, :2], atol=1e-6)
+    assert all(abs(p.opening_before - 0.04) < 1e-6 and abs(p.opening_after - 0.04) < 1e-6 for p in result.primitives)
+    assert result.cost >= np.linalg.norm([0.06, 0.025]) - 1e-9
+
+
+def test_rotation_in_place_and_rotation_then_translation(box):
+    start = grasp_pose(box, [0.0, 0.0, 0.02], 0.0)
+    turned = grasp_pose(box, [0.0, 0.0, 0.02], np.deg2rad(90))
+    result = plan(box, start, turned, SearchOptions(principal_finger=0))
+    assert [p.kind for p in result.primitives] == [PrimitiveKind.ROTATION]
+    assert np.rad2deg(result.primitives[0].angle) == pytest.approx(90.0, abs=1e-6)
+    moved = grasp_pose(box, [-0.03, 0.0, 0.02], np.deg2rad(-30))
+    result = plan(box, start, moved, SearchOptions(principal_finger=0))
+    kinds = [p.kind for p in result.primitives]
+    assert kinds.count(PrimitiveKind.ROTATION) == 1 and PrimitiveKind.TRANSLATION in kinds
+    rotation = next(p for p in result.primitives if p.kind == PrimitiveKind.ROTATION)
+    assert np.rad2deg(rotation.angle) == pytest.approx(-30.0, abs=1e-6)
+    assert np.allclose(sum(p.translation for p in result.primitives), [-0.03, 0.0, 0.0], atol=1e-6)
+
+
+def test_different_components_is_a_regrasp_result_not_an_exception(box):
+    start = grasp_pose(box, [0.0, 0.0, 0.02], 0.0)
+    side = grasp_pose(box, [0.05, 0.0, 0.0], 0.0)
+    result = plan(box, start, side)
+    assert result.status == PlanStatus.DIFFERENT_COMPONENTS
+    assert "regrasp" in result.message
+    assert result.start_component != result.goal_component >= 0
+
+
+@pytest.mark.parametrize("pose, status, words", [
+    (GripperPose(np.array([np.nan, 0, 0]), np.array([0, 0, 0, 1.0])), PlanStatus.BAD_REQUEST, "non-finite"),
+    (GripperPose(np.zeros(3), np.array([0, 0, 0, 2.0])), PlanStatus.BAD_REQUEST, "unit quaternion"),
+    (GripperPose(np.zeros(3), np.array([0, 0, 0, 1.0]), -0.01), PlanStatus.BAD_REQUEST, "negative"),
+    (GripperPose(np.array([0.0, 0.5, 0.0]), np.array([0, 0, 0, 1.0])), PlanStatus.INVALID_START, "misses"),
+])
+def test_bad_start_poses_get_typed_errors(box, pose, status, words):
+    goal = grasp_pose(box, [0.0, 0.0, 0.02], 0.0)
+    result = plan(box, pose, goal)
+    assert result.status == status and words in result.message
+    assert not result.primitives
+
+
+def test_wrong_opening_and_blocked_finger_are_invalid(box, bracket):
+    good = grasp_pose(box, [0.0, 0.0, 0.02], 0.0)
+    wrong = GripperPose(good.position, good.quaternion, good.opening + 0.02)
+    assert "opening" in plan(box, wrong, good).message
+    # On the bracket's plate 10 mm from the wall, a finger pointing at the wall collides.
+    free = grasp_pose(bracket, [0.0, 0.0, 0.008], 0.0)
+    at_wall = bracket.angle_of(np.array([bracket.vertex_at(np.array([0.04, 0.0, 0.008]))[0]]), np.array([[1.0, 0, 0]]))[0]
+    blocked = grasp_pose(bracket, [0.04, 0.0, 0.008], at_wall)
+    result = plan(bracket, blocked, free)
+    assert result.status == PlanStatus.INVALID_START and "collide" in result.message
+
+
+def test_save_load_gives_an_identical_graph(box, tmp_path):
+    path = save_graph(box, tmp_path / "box.npz")
+    loaded = load_graph(path)
+    assert loaded.parameters == box.parameters and loaded.source_hash == box.source_hash
+    for name in ("positions", "normals", "references", "admissible", "node_vertex", "node_angles", "node_component",
+                 "node_edges", "graph_edges", "vertex_component", "mesh_vertices", "mesh_triangles"):
+        assert np.array_equal(getattr(loaded, name), getattr(box, name)), name
+    start, goal = grasp_pose(box, [-0.03, 0.0, 0.02], 0.0), grasp_pose(box, [0.02, 0.01, 0.02], 1.0)
+    a, b = plan(box, start, goal), plan(loaded, start, goal)
+    assert a.cost == b.cost and len(a.primitives) == len(b.primitives)
+    assert cache_key(box.source_hash, box.parameters) != cache_key(box.source_hash, GraphParameters(delta=0.08))
+
+
+def test_build_is_deterministic():
+    a, b = build("plug"), build("plug")
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.node_angles, b.node_angles)
+
+
+def test_matrix_is_symmetric_with_zero_diagonal_and_blocks_match_planning(bracket, tmp_path):
+    result = manipulability_matrix(bracket)
+    m = result.matrix
+    assert m.shape[0] == m.shape[1] > 300
+    assert np.array_equal(m, m.T) and not np.any(np.diag(m))
+    assert result.sampled > len(m) and sum(result.faults.values()) == result.sampled - len(m)
+    # Blocks are contiguous after reordering, and the matrix is exactly "same block".
+    assert np.all(np.diff(result.blocks) >= 0)
+    same = result.blocks[:, None] == result.blocks[None, :]
+    np.fill_diagonal(same, False)
+    assert np.array_equal(m.astype(bool), same)
+    rng = np.random.default_rng(1)
+    pairs = np.vstack([np.argwhere(m == 1)[rng.choice(int(m.sum()), 15)],
+                       np.argwhere((m == 0) & ~np.eye(len(m), dtype=bool))[rng.choice(int((m == 0).sum() - len(m)), 15)]])
+    for i, j in pairs:
+        to_pose = lambda k: GripperPose(result.positions[k], Rotation.from_matrix(result.rotations[k]).as_quat())
+        outcome = plan(bracket, to_pose(i), to_pose(j), SearchOptions(principal_finger=0))
+        assert outcome.success == bool(m[i, j]), (i, j, outcome.status.name, outcome.message)
+    npy, png = save_matrix(result, tmp_path / "matrix.png")
+    assert np.array_equal(np.load(npy), m) and png.stat().st_size > 10_000
+
+
+def test_primitives_merge_zigzags_and_keep_the_rotation_direction():
+    from dmg_planner.primitives import primitives_from_path
+
+    zigzag = np.array([[0, 0, 0], [0.01, 0.004, 0], [0.02, -0.004, 0], [0.03, 0.004, 0], [0.04, 0, 0]], float)
+    secondary = zigzag - [0, 0, 0.04]
+    merged = primitives_from_path(zigzag, secondary, np.zeros(5), 0.0, tolerance=0.005)
+    assert len(merged) == 1 and np.allclose(merged[0].translation, [0.04, 0, 0])
+    split = primitives_from_path(zigzag, secondary, np.zeros(5), 0.0, tolerance=0.002)
+    assert len(split) > 1 and np.allclose(sum(p.translation for p in split), [0.04, 0, 0])
+    # Turning +200 deg in 5 deg steps through admissible angles stays +200, never "-160".
+    steps = np.deg2rad(np.arange(0, 205, 5))
+    still = np.zeros((len(steps), 3))
+    turn = primitives_from_path(still, still - [0, 0, 0.04], steps, np.deg2rad(200), tolerance=0.005)
+    assert len(turn) == 1 and np.rad2deg(turn[0].angle) == pytest.approx(200.0)
