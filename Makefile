@@ -16,7 +16,8 @@ test: setup
 	$(PY) -m pytest
 
 bench: setup
-	$(DMG) graph bench --json -o out/bench_graph.json
+	$(DMG) graph bench --objects box plug bracket -o out/bench_graph.json
+	$(DMG) bench planner -o out/bench_planner.json
 
 clean:
 	rm -rf build out

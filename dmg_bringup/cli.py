@@ -9,7 +9,7 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import bag, demo, graph_cli, launcher, ros_verbs
+from dmg_bringup import bag, demo, graph_cli, launcher, planner_bench, ros_verbs
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -41,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     launcher.register(subparsers)
     graph_cli.register(subparsers)
     demo.register(subparsers)
+    planner_bench.register(subparsers)
     return parser
 
 

@@ -1,6 +1,7 @@
 """`dmg up`: children start with prefixed logs and none survives the launcher."""
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -88,11 +89,24 @@ def test_optional_node_may_exit(tmp_path):
 
 def test_package_nodes_get_their_name_and_parameters(tmp_path):
     """A package/executable entry is resolved like ros2 run, renamed and given a params file."""
-    launch = _launch_file(tmp_path, [{"name": "my_planner", "package": "dmg_planner",
-                                      "executable": "planner_node", "parameters": {"cache_dir": "/tmp/x"}}])
-    result = subprocess.run([DMG, "up", "--config", launch], capture_output=True, text=True, timeout=60)
-    started = next(line for line in result.stdout.splitlines() if "[dmg up] started my_planner" in line)
+    launch = _launch_file(tmp_path, [{"name": "my_planner", "package": "dmg_planner", "executable": "planner_node",
+                                      "parameters": {"cache_dir": str(tmp_path / "cache"), "objects": ["plug"]}}])
+    process = subprocess.Popen([DMG, "up", "--config", launch], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True, start_new_session=True)
+    lines = []
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any("planner up" in line for line in lines):
+            lines.append(process.stdout.readline())
+    finally:
+        os.killpg(process.pid, signal.SIGTERM)
+        rest = process.communicate(timeout=30)[0]
+    text = "".join(lines) + rest
+    started = next(line for line in lines if "[dmg up] started my_planner" in line)
     assert "lib/dmg_planner/planner_node --ros-args -r __node:=my_planner" in started
+    up = next(line for line in lines if "planner up" in line)
+    assert "[my_planner]" in up and "of 1 objects" in up, text
+    assert "plug:" in text and process.returncode == 0, text
 
 
 @pytest.mark.parametrize("content, message", [
