@@ -1,10 +1,11 @@
 """`dmg bench planner`: service round-trip latency of planner_node beside a trivial echo service.
 
-Both servers run as their own processes (the planner with `objects:=[box]`, the echo
+Both servers run as their own processes (the planner with its default objects, the echo
 server answering PlanRepositioning with an empty OK at once); one client calls each in
 turn, one call at a time, and reports p50/p95 of the round trip. The difference is what
 the planner adds over DDS + rclpy for the same message type. The planner's own
-planning_time (measured inside the node) is reported too.
+planning_time (measured inside the node) is reported too, and the planner's start-up time
+until all shipped objects answer, with an empty graph cache (cold) and from the cache (warm).
 """
 from __future__ import annotations
 
@@ -69,13 +70,9 @@ def run(calls: int) -> dict:
 
     cache = tempfile.mkdtemp(prefix="dmg_bench_")
     env = ros_environment()
-    children = [
-        subprocess.Popen([sys.executable, "-m", "dmg_bringup.cli", "run", "dmg_planner", "planner_node", "--ros-args",
-                          "-p", "objects:=[box]", "-p", f"cache_dir:={cache}"], env=env, start_new_session=True,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
-        subprocess.Popen([sys.executable, "-c", "from dmg_bringup.planner_bench import echo_server; echo_server()"],
-                         env=env, start_new_session=True, stdout=subprocess.DEVNULL),
-    ]
+    planner_command = [sys.executable, "-m", "dmg_bringup.cli", "run", "dmg_planner", "planner_node", "--ros-args",
+                       "-p", f"cache_dir:={cache}"]
+    children: list[subprocess.Popen] = []
     model = load_object("box")
     graph = build_graph(model.load_shape(0.001), GraphParameters(seed_resolution=model.seed_resolution))
     rng = np.random.default_rng(0)
@@ -84,9 +81,25 @@ def run(calls: int) -> dict:
     try:
         clients = {name: node.create_client(PlanRepositioning, service, qos_profile=QoSProfile(depth=10))
                    for name, service in (("planner", "/plan_repositioning"), ("echo", ECHO_SERVICE))}
-        for name, client in clients.items():
-            if not client.wait_for_service(timeout_sec=60):
-                raise RuntimeError(f"{name} service did not appear")
+        # Start-up until every shipped object answers: empty cache (cold), then again (warm).
+        startup = {}
+        for kind in ("cold", "warm"):
+            began = time.perf_counter()
+            children.append(subprocess.Popen(planner_command, env=env, start_new_session=True,
+                                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            if not clients["planner"].wait_for_service(timeout_sec=60):
+                raise RuntimeError("planner service did not appear")
+            for name in ("box", "plug", "bracket"):
+                _wait_until_ready(node, clients["planner"], PlanRepositioning.Request(object_id=name))
+            startup[kind] = time.perf_counter() - began
+            if kind == "cold":
+                _stop(children.pop())
+                while clients["planner"].service_is_ready():
+                    rclpy.spin_once(node, timeout_sec=0.1)
+        children.append(subprocess.Popen([sys.executable, "-c", "from dmg_bringup.planner_bench import echo_server; "
+                                          "echo_server()"], env=env, start_new_session=True, stdout=subprocess.DEVNULL))
+        if not clients["echo"].wait_for_service(timeout_sec=60):
+            raise RuntimeError("echo service did not appear")
         # Requests on the box's top face: random contacts and finger angles (all valid).
         requests = []
         for _ in range(calls):
@@ -112,7 +125,7 @@ def run(calls: int) -> dict:
                     failures += response is None or not response.success
                     if response is not None and response.success:
                         planning.append(response.plan.planning_time)
-        report = {"calls": calls, "failures": failures, "planner": _percentiles(times["planner"]),
+        report = {"calls": calls, "failures": failures, "startup_s": startup, "planner": _percentiles(times["planner"]),
                   "echo": _percentiles(times["echo"]), "planning_inside_node": _percentiles(planning)}
         report["planner_adds"] = {key: report["planner"][key] - report["echo"][key] for key in ("p50_ms", "p95_ms")}
         report["goal_adds_under_5ms_p95"] = report["planner_adds"]["p95_ms"] < 5.0
@@ -121,12 +134,16 @@ def run(calls: int) -> dict:
         node.destroy_node()
         rclpy.try_shutdown()
         for child in children:
-            os.killpg(child.pid, signal.SIGINT)
-        for child in children:
-            try:
-                child.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(child.pid, signal.SIGKILL)
+            _stop(child)
+
+
+def _stop(child: subprocess.Popen) -> None:
+    os.killpg(child.pid, signal.SIGINT)
+    try:
+        child.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.killpg(child.pid, signal.SIGKILL)
+        child.wait()
 
 
 def _wait_until_ready(node, client, request, timeout: float = 60.0) -> None:
@@ -155,6 +172,8 @@ def command(args: argparse.Namespace) -> int:
         for name in ("planner", "echo", "planning_inside_node"):
             r = report[name]
             print(f"{name:22s} p50 {r['p50_ms']:7.2f} ms  p95 {r['p95_ms']:7.2f} ms  max {r['max_ms']:7.2f} ms")
+        print(f"start-up until box, plug and bracket answer: cold (empty cache) {report['startup_s']['cold']:.2f} s, "
+              f"warm (from cache) {report['startup_s']['warm']:.2f} s")
         adds = report["planner_adds"]
         print(f"planner adds over echo: p50 {adds['p50_ms']:.2f} ms, p95 {adds['p95_ms']:.2f} ms "
               f"(goal < 5 ms at p95: {'met' if report['goal_adds_under_5ms_p95'] else 'MISSED'}); "

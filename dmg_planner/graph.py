@@ -169,9 +169,10 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
     The finger is a box: from the contact along direction d for length l, across the tangent
     plane over [-w/2, w/2], and off the surface from a clearance of one voxel to the
     thickness t. Rays run along its length on a grid over the cross-section (including its
-    four long edges) and across its width at both ends, never further apart than
-    `ray_spacing`; any part of the object inside the box is hit by some ray unless it is
-    thinner than that spacing in both directions.
+    four long edges), across its width at both ends, and across its width along the length
+    on the layer nearest the surface, never further apart than `ray_spacing`: anything
+    rising from the surface into the finger is hit unless it is thinner than that spacing
+    in both directions (a pin), and so is anything entering through the box's sides.
     """
     clearance = p.voxel_resolution
     lateral = np.linspace(-p.finger_width / 2, p.finger_width / 2,
@@ -186,7 +187,11 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
     base = positions[:, None, None, :]
     along_u, along_h = (g.ravel() for g in np.meshgrid(lateral, heights, indexing="ij"))
     along = base + along_u[:, None] * side + along_h[:, None] * n              # (S, A, L*H, 3)
-    across_s, across_h = (g.ravel() for g in np.meshgrid([0.0, p.finger_length], heights, indexing="ij"))
+    # Across the width: at both ends on every layer, and every ray_spacing along the length on
+    # the lowest layer (anything rising from the surface into the finger crosses that layer).
+    stations = np.linspace(0.0, p.finger_length, max(2, int(np.ceil(p.finger_length / p.ray_spacing)) + 1))
+    across_s = np.concatenate([np.repeat([0.0, p.finger_length], len(heights)), stations[1:-1]])
+    across_h = np.concatenate([np.tile(heights, 2), np.full(len(stations) - 2, heights[0])])
     across = base + across_s[:, None] * d[:, :, None, :] - (p.finger_width / 2) * side + across_h[:, None] * n
     origins = np.concatenate([along, across], axis=2)
     directions = np.concatenate([np.broadcast_to(d[:, :, None, :], along.shape), np.broadcast_to(side, across.shape)], axis=2)

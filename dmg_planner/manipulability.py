@@ -85,7 +85,7 @@ def manipulability_matrix(graph: DexterousManipulationGraph, spacing: float = 0.
         members = np.flatnonzero(groups == group)
         first = index[members[0]]
         states = state_graph(graph, int(component[members[0]]), grasps.axis[first], int(secondary_component[members[0]]),
-                             grasps.finger_direction[first], options)
+                             options)
         _, state_labels = connected_components(states.matrix, directed=False)
         node_slot = np.searchsorted(states.nodes, grasps.node[index[members]])
         bins = graph.angle_bin(grasps.angle[index[members]])

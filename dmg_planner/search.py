@@ -248,12 +248,16 @@ def locate_grasps(graph: DexterousManipulationGraph, positions: np.ndarray, rota
     contact, hit = _cast(graph, positions - reach * axis, np.ascontiguousarray(axis))
     secondary, _ = _cast(graph, contact + 2 * reach * axis, np.ascontiguousarray(-axis))
     fault = np.where(hit, GraspFault.NONE, GraspFault.MISSES_OBJECT)
-    vertex, node, angle, bad = _nodes_near(graph, contact, -axis, finger_direction)
-    fault = np.where(fault == 0, np.choose(bad, [GraspFault.NONE, GraspFault.NO_PRINCIPAL_VERTEX,
-                                                 GraspFault.PRINCIPAL_ANGLE_BLOCKED]), fault)
-    secondary_vertex, secondary_node, _, bad = _nodes_near(graph, secondary, axis, finger_direction)
-    fault = np.where(fault == 0, np.choose(bad, [GraspFault.NONE, GraspFault.NO_SECONDARY_VERTEX,
-                                                 GraspFault.SECONDARY_ANGLE_BLOCKED]), fault)
+    # Both fingers' contacts in one query: principal rows first, then secondary rows.
+    count = len(positions)
+    vertices, nodes, angles, bad = _nodes_near(graph, np.vstack([contact, secondary]), np.vstack([-axis, axis]),
+                                               np.vstack([finger_direction, finger_direction]))
+    vertex, node, angle = vertices[:count], nodes[:count], angles[:count]
+    secondary_vertex, secondary_node = vertices[count:], nodes[count:]
+    fault = np.where(fault == 0, np.choose(bad[:count], [GraspFault.NONE, GraspFault.NO_PRINCIPAL_VERTEX,
+                                                         GraspFault.PRINCIPAL_ANGLE_BLOCKED]), fault)
+    fault = np.where(fault == 0, np.choose(bad[count:], [GraspFault.NONE, GraspFault.NO_SECONDARY_VERTEX,
+                                                         GraspFault.SECONDARY_ANGLE_BLOCKED]), fault)
     return GraspBatch(fault, contact, secondary, axis, finger_direction, vertex, node, angle,
                       secondary_vertex, secondary_node)
 
@@ -296,7 +300,23 @@ class StateGraph:
     nodes: np.ndarray          # (K,) DMG nodes of the principal component
     valid: np.ndarray          # (K, A) principal angle set and secondary still in C_s
     secondaries: np.ndarray    # (K, 3) secondary contact when the principal is at the node
-    matrix: sparse.csr_matrix  # (2*K*A)^2 edge costs
+    matrix: sparse.csr_matrix  # (2*K*A)^2 edge costs without the arm-collision term
+    directions: np.ndarray     # (K, A, 3) finger direction of every state
+    turn_slots: np.ndarray     # positions in matrix.data of the one-bin rotation steps
+    turn_from: np.ndarray      # (k, bin) of each rotation step's source and its target bin
+    turn_to: np.ndarray
+
+    def costs_for(self, start_direction: np.ndarray, arm_collision_penalty: float) -> sparse.csr_matrix:
+        """The edge costs of one query: arm_collision_penalty on every rotation step that turns
+        the fingers past 90 deg from where they pointed at the start."""
+        if arm_collision_penalty == 0:
+            return self.matrix
+        ahead = self.directions @ start_direction >= 0
+        k, from_bin = self.turn_from
+        crossing = ahead[k, from_bin] & ~ahead[k, self.turn_to]
+        data = self.matrix.data.copy()
+        data[self.turn_slots] += arm_collision_penalty * crossing
+        return sparse.csr_matrix((data, self.matrix.indices, self.matrix.indptr), shape=self.matrix.shape)
 
     def state(self, node: int, angle_bin: int, layer: int = 0) -> int:
         k = int(np.searchsorted(self.nodes, node))
@@ -310,20 +330,25 @@ class StateGraph:
 
 
 def state_graph(graph: DexterousManipulationGraph, component: int, axis: np.ndarray, secondary_component: int,
-                start_direction: np.ndarray, options: SearchOptions) -> StateGraph:
-    """Build (or fetch from the graph's cache) the search space for one grasp."""
+                options: SearchOptions) -> StateGraph:
+    """Build (or fetch from the graph's cache) the search space for one grasp.
+
+    It depends on the grasp axis and components only, so queries that share them (all
+    grasps across one pair of faces, say) share it; the start's finger direction enters
+    per query through StateGraph.costs_for.
+    """
     key = ("states", component, tuple(np.round(axis, 6)), secondary_component,
-           tuple(np.round(start_direction, 6)), options)
+           replace(options, principal_finger=-1, arm_collision_penalty=0.0))
     cache = graph._cache.setdefault("state_graphs", {})
     if key not in cache:
-        if len(cache) > 64:
+        if len(cache) > 256:
             cache.clear()
-        cache[key] = _build_state_graph(graph, component, axis, secondary_component, start_direction, options)
+        cache[key] = _build_state_graph(graph, component, axis, secondary_component, options)
     return cache[key]
 
 
 def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: np.ndarray,
-                       secondary_component: int, start_direction: np.ndarray, options: SearchOptions) -> StateGraph:
+                       secondary_component: int, options: SearchOptions) -> StateGraph:
     p = graph.parameters
     count = p.angle_count
     nodes = np.flatnonzero(graph.node_component == component)
@@ -366,19 +391,27 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
     rows += [index[k, angle_bin], size + index[k, angle_bin]]
     cols += [size + index[k, angle_bin], index[k, angle_bin]]
     costs += [np.full(len(k), options.rotation_penalty + ZERO_COST), np.full(len(k), ZERO_COST)]
-    ahead = start_direction @ np.moveaxis(directions, -1, 0).reshape(3, -1)
-    ahead = ahead.reshape(len(nodes), count) >= 0
+    turn_first = sum(len(r) for r in rows)
+    turn_k, turn_bin, turn_to = [], [], []
     for shift in (1, -1):
         target = (angle_bin + shift) % count
         ok = valid[k, target]
-        crossing = ahead[k[ok], angle_bin[ok]] & ~ahead[k[ok], target[ok]]
         rows.append(size + index[k[ok], angle_bin[ok]])
         cols.append(size + index[k[ok], target[ok]])
-        costs.append(options.rotation_penalty * p.angle_step / np.pi + options.arm_collision_penalty * crossing
-                     + ZERO_COST)
-    matrix = sparse.csr_matrix((np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))),
-                               shape=(2 * size, 2 * size))
-    return StateGraph(nodes=nodes, valid=valid, secondaries=secondaries, matrix=matrix)
+        costs.append(np.full(int(ok.sum()), options.rotation_penalty * p.angle_step / np.pi + ZERO_COST))
+        turn_k.append(k[ok])
+        turn_bin.append(angle_bin[ok])
+        turn_to.append(target[ok])
+    rows, cols, costs = np.concatenate(rows), np.concatenate(cols), np.concatenate(costs)
+    # CSR built here (rather than by scipy) so the rotation steps' slots in .data are known.
+    order = np.lexsort((cols, rows))
+    slot = np.empty_like(order)
+    slot[order] = np.arange(len(order))
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=2 * size))])
+    matrix = sparse.csr_matrix((costs[order], cols[order], indptr), shape=(2 * size, 2 * size))
+    return StateGraph(nodes=nodes, valid=valid, secondaries=secondaries, matrix=matrix, directions=directions,
+                      turn_slots=slot[turn_first:], turn_from=np.stack([np.concatenate(turn_k), np.concatenate(turn_bin)]),
+                      turn_to=np.concatenate(turn_to))
 
 
 def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,
@@ -392,7 +425,20 @@ def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPos
     except ValueError as error:
         return PlanResult(PlanStatus.BAD_REQUEST, str(error), planning_time=time.perf_counter() - began)
     fingers = (0, 1) if options.principal_finger < 0 else (options.principal_finger,)
-    results = [_plan_with(graph, start, goal, options, finger) for finger in fingers]
+    # One resolution serves both fingers: finger 1 leading is finger 0's grasp seen from the other side.
+    first = fingers[0]
+    try:
+        s = resolve_grasp(graph, start, first, "start")
+    except GraspError as error:
+        return PlanResult(PlanStatus.INVALID_START, str(error), first, planning_time=time.perf_counter() - began)
+    try:
+        g = resolve_grasp(graph, goal, first, "goal")
+    except GraspError as error:
+        return PlanResult(PlanStatus.INVALID_GOAL, str(error), first, int(graph.node_component[s.node]), start=s,
+                          planning_time=time.perf_counter() - began)
+    results = [_plan_with(graph, s, g, options)]
+    if len(fingers) == 2:
+        results.append(_plan_with(graph, _swapped(graph, s), _swapped(graph, g), options))
     successes = [r for r in results if r.success]
     result = min(successes, key=lambda r: r.cost) if successes else results[0]
     if not successes and len(results) > 1 and results[1].message != results[0].message:
@@ -401,16 +447,15 @@ def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPos
     return result
 
 
-def _plan_with(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,
-               options: SearchOptions, finger: int) -> PlanResult:
-    try:
-        s = resolve_grasp(graph, start, finger, "start")
-    except GraspError as error:
-        return PlanResult(PlanStatus.INVALID_START, str(error), finger)
-    try:
-        g = resolve_grasp(graph, goal, finger, "goal")
-    except GraspError as error:
-        return PlanResult(PlanStatus.INVALID_GOAL, str(error), finger, int(graph.node_component[s.node]), start=s)
+def _swapped(graph: DexterousManipulationGraph, grasp: Grasp) -> Grasp:
+    """The same grasp with the other finger leading."""
+    angle = float(graph.angle_of(np.array([grasp.secondary_vertex]), grasp.finger_direction[None])[0])
+    return Grasp(1 - grasp.principal_finger, grasp.secondary, grasp.contact, -grasp.axis, grasp.finger_direction,
+                 grasp.secondary_vertex, grasp.secondary_node, angle, grasp.vertex, grasp.node)
+
+
+def _plan_with(graph: DexterousManipulationGraph, s: Grasp, g: Grasp, options: SearchOptions) -> PlanResult:
+    finger = s.principal_finger
     components = [int(graph.node_component[n]) for n in (s.node, g.node, s.secondary_node, g.secondary_node)]
     base = dict(principal_finger=finger, start_component=components[0], goal_component=components[1], start=s, goal=g)
     if components[0] != components[1] or components[2] != components[3]:
@@ -423,7 +468,7 @@ def _plan_with(graph: DexterousManipulationGraph, start: GripperPose, goal: Grip
     if axis_change > AXIS_TOLERANCE:
         return PlanResult(PlanStatus.NO_PATH, f"the goal's grasp axis is {np.rad2deg(axis_change):.1f} deg from the "
                           f"start's; in-hand rotations and translations keep the grasp axis", **base)
-    states = state_graph(graph, components[0], s.axis, components[2], s.finger_direction, options)
+    states = state_graph(graph, components[0], s.axis, components[2], options)
     start_state = states.state(s.node, int(graph.angle_bin(s.angle)))
     goal_bin = int(graph.angle_bin(g.angle))
     if not states.valid[np.searchsorted(states.nodes, g.node), goal_bin]:
@@ -434,7 +479,7 @@ def _plan_with(graph: DexterousManipulationGraph, start: GripperPose, goal: Grip
         return PlanResult(PlanStatus.INVALID_START, "seen from the start contact's supervoxel centre the secondary "
                           f"finger falls outside its component {components[2]}: move the start grasp off the "
                           "boundary", **base)
-    matrix = states.matrix
+    matrix = states.costs_for(s.finger_direction, options.arm_collision_penalty)
     distance, predecessors = dijkstra(matrix, directed=True, indices=start_state, return_predecessors=True)
     if not np.isfinite(distance[goal_state]):
         return PlanResult(PlanStatus.NO_PATH, f"no path in component {components[0]} keeps the secondary finger "

@@ -26,6 +26,8 @@ from scipy.spatial import cKDTree
 ITERATIONS = 3
 # A seed needs this fraction of the voxels a flat seed cell would hold.
 MIN_SEED_FILL = 0.2
+# voxelize uses a dense lookup table over its grid up to this many cells (or 16 per sample).
+DENSE_CELLS = 1 << 22
 
 
 @dataclass
@@ -63,20 +65,34 @@ def voxelize(points: np.ndarray, normals: np.ndarray, resolution: float) -> Voxe
     keys -= keys.min(axis=0) - 1
     dims = keys.max(axis=0) + 2
     codes = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
-    unique, inverse, counts = np.unique(codes, return_inverse=True, return_counts=True)
+    # All 26 neighbour offsets in increasing code order, so each voxel's neighbours come out
+    # sorted and the rows below are already the canonical CSR of the symmetric adjacency.
+    offsets = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
+                        if (a, b, c) != (0, 0, 0)])
+    offset_codes = np.sort((offsets[:, 0] * dims[1] + offsets[:, 1]) * dims[2] + offsets[:, 2])
+    cells = int(np.prod(dims))
+    if cells <= max(DENSE_CELLS, 16 * len(codes)):
+        # Dense lookup table over the padded grid: no sorting, no binary search.
+        counts = np.bincount(codes, minlength=cells)
+        unique = np.flatnonzero(counts)
+        counts = counts[unique]
+        table = np.full(cells, -1, np.int32)
+        table[unique] = np.arange(len(unique), dtype=np.int32)
+        inverse = table[codes]
+        neighbours = table[unique[:, None] + offset_codes[None, :]]
+        found = neighbours >= 0
+        cols = neighbours[found]
+    else:
+        unique, inverse, counts = np.unique(codes, return_inverse=True, return_counts=True)
+        targets = unique[:, None] + offset_codes[None, :]
+        position = np.searchsorted(unique, targets).clip(max=len(unique) - 1)
+        found = unique[position] == targets
+        cols = position[found].astype(np.int32)
     centers = _sums(inverse, points, len(unique)) / counts[:, None]
     vox_normals = _sums(inverse, normals, len(unique))
-    # Half of the 26 offsets: every undirected voxel pair once.
-    offsets = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
-                        if (a, b, c) > (0, 0, 0)])
-    offset_codes = (offsets[:, 0] * dims[1] + offsets[:, 1]) * dims[2] + offsets[:, 2]
-    targets = unique[:, None] + offset_codes[None, :]
-    position = np.searchsorted(unique, targets).clip(max=len(unique) - 1)
-    found = unique[position] == targets
-    rows = np.broadcast_to(np.arange(len(unique))[:, None], targets.shape)[found]
-    cols = position[found]
-    adjacency = sparse.coo_matrix((np.ones(len(rows), bool), (rows, cols)), shape=(len(unique),) * 2)
-    adjacency = (adjacency + adjacency.T).tocsr()
+    indptr = np.zeros(len(unique) + 1, np.int32)
+    np.cumsum(found.sum(axis=1), out=indptr[1:])
+    adjacency = sparse.csr_matrix((np.ones(len(cols), bool), cols, indptr), shape=(len(unique),) * 2)
     return Voxels(centers=centers, normals=_unit(vox_normals), adjacency=adjacency)
 
 
@@ -110,23 +126,32 @@ def _grow(voxels: Voxels, seeds: np.ndarray, centers: np.ndarray, normals: np.nd
     labels[seeds] = np.arange(len(seeds))
     best[seeds] = 0.0
     indptr, indices = voxels.adjacency.indptr, voxels.adjacency.indices
+    voxel_centers, voxel_normals = voxels.centers, voxels.normals
+    reached = np.zeros(count, bool)
     frontier = seeds
     while len(frontier):
-        degree = indptr[frontier + 1] - indptr[frontier]
-        source = np.repeat(frontier, degree)
-        starts = np.repeat(indptr[frontier] - np.cumsum(degree) + degree, degree)
-        target = indices[starts + np.arange(len(source))]
-        label = labels[source]
-        offset = voxels.centers[target] - centers[label]
+        begin = indptr[frontier]
+        degree = indptr[frontier + 1] - begin
+        begin -= np.cumsum(degree) - degree
+        target = indices[np.repeat(begin, degree) + np.arange(len(begin) and int(degree.sum()))]
+        label = np.repeat(labels[frontier], degree)
+        # A neighbour already holding this label has exactly this distance already: never better.
+        other = labels[target] != label
+        target, label = target[other], label[other]
+        offset = voxel_centers[target] - centers[label]
         spatial = np.einsum("ij,ij->i", offset, offset)
-        normal = 1.0 - np.einsum("ij,ij->i", voxels.normals[target], normals[label])
+        normal = 1.0 - np.einsum("ij,ij->i", voxel_normals[target], normals[label])
         distance = spatial_weight * spatial + normal_weight * normal**2
         better = distance < best[target]
         target, label, distance = target[better], label[better], distance[better]
         np.minimum.at(best, target, distance)
         won = distance == best[target]
-        labels[target[won]] = label[won]
-        frontier = np.unique(target[won])
+        target = target[won]
+        labels[target] = label[won]
+        # The voxels that changed, in increasing order (as np.unique would give them).
+        reached[target] = True
+        frontier = np.flatnonzero(reached)
+        reached[frontier] = False
     return labels
 
 
@@ -142,19 +167,22 @@ def vccs(points: np.ndarray, normals: np.ndarray, voxel_resolution: float, seed_
     for iteration in range(ITERATIONS):
         labels = _grow(voxels, seeds, centers, seed_normals, spatial_weight, normal_importance)
         # Drop supervoxels that lost every voxel, then recentre the rest.
-        used = np.unique(labels[labels >= 0])
+        member = labels >= 0
+        sizes = np.bincount(labels[member], minlength=len(seeds))
+        used = np.flatnonzero(sizes)
+        sizes = sizes[used][:, None]
         remap = np.full(len(seeds), -1)
         remap[used] = np.arange(len(used))
-        labels = np.where(labels >= 0, remap[labels.clip(min=0)], -1)
-        member = labels >= 0
-        sizes = np.bincount(labels[member], minlength=len(used))[:, None]
+        labels = np.where(member, remap[labels.clip(min=0)], -1)
         centers = _sums(labels[member], voxels.centers[member], len(used)) / sizes
         seed_normals = _unit(_sums(labels[member], voxels.normals[member], len(used)))
         if iteration + 1 < ITERATIONS:
             # Next growth starts from each supervoxel's member voxel nearest its centre.
             _, nearest = tree.query(centers)
             own = labels[nearest] == np.arange(len(used))
-            seeds = np.where(own, nearest, _nearest_member(voxels.centers, labels, centers))
+            seeds = nearest
+            if not own.all():
+                seeds[~own] = _nearest_member(voxels.centers, labels, centers, ~own)
     rows, cols = voxels.adjacency.nonzero()
     a, b = labels[rows], labels[cols]
     crossing = (a >= 0) & (b >= 0) & (a < b)
@@ -164,9 +192,12 @@ def vccs(points: np.ndarray, normals: np.ndarray, voxel_resolution: float, seed_
                        edges=edges.reshape(-1, 2))
 
 
-def _nearest_member(voxel_centers: np.ndarray, labels: np.ndarray, centers: np.ndarray) -> np.ndarray:
-    """For each supervoxel, its member voxel nearest its centre (when the plain nearest voxel is not a member)."""
+def _nearest_member(voxel_centers: np.ndarray, labels: np.ndarray, centers: np.ndarray,
+                    wanted: np.ndarray) -> np.ndarray:
+    """For each wanted supervoxel (bool mask), its member voxel nearest its centre (when the
+    plain nearest voxel is not a member)."""
     member = np.flatnonzero(labels >= 0)
+    member = member[wanted[labels[member]]]
     distance = np.sum((voxel_centers[member] - centers[labels[member]]) ** 2, axis=1)
     order = np.lexsort((distance, labels[member]))
     first = np.ones(len(order), bool)
