@@ -110,10 +110,21 @@ def _seeds(voxels: Voxels, voxel_resolution: float, seed_resolution: float) -> n
     cells -= cells.min(axis=0)
     span = cells.max(axis=0) + 1
     group = ((cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]) * 6 + direction
+    needed = MIN_SEED_FILL * (seed_resolution / voxel_resolution) ** 2
+    groups = int(group.max()) + 1
+    if groups <= max(DENSE_CELLS, 16 * len(group)):
+        # Per group: the lowest-index voxel at the smallest distance (what the sort below picks).
+        sizes = np.bincount(group, minlength=groups)
+        nearest = np.full(groups, np.inf)
+        np.minimum.at(nearest, group, distance)
+        candidate = np.flatnonzero(distance == nearest[group])
+        pick = np.full(groups, len(group))
+        np.minimum.at(pick, group[candidate], candidate)
+        present = np.flatnonzero(sizes)
+        return pick[present][sizes[present] >= needed]
     order = np.lexsort((distance, group))
     first = np.r_[True, group[order][1:] != group[order][:-1]]
     sizes = np.diff(np.r_[np.flatnonzero(first), len(order)])
-    needed = MIN_SEED_FILL * (seed_resolution / voxel_resolution) ** 2
     return order[first][sizes >= needed]
 
 
@@ -136,18 +147,21 @@ def _grow(voxels: Voxels, seeds: np.ndarray, centers: np.ndarray, normals: np.nd
         target = indices[np.repeat(begin, degree) + np.arange(len(begin) and int(degree.sum()))]
         label = np.repeat(labels[frontier], degree)
         # A neighbour already holding this label has exactly this distance already: never better.
-        other = labels[target] != label
-        target, label = target[other], label[other]
-        offset = voxel_centers[target] - centers[label]
+        other = np.take(labels, target) != label
+        target, label = np.compress(other, target), np.compress(other, label)
+        # np.take: much faster than fancy indexing for gathering rows.
+        offset = np.take(voxel_centers, target, axis=0)
+        offset -= np.take(centers, label, axis=0)
         spatial = np.einsum("ij,ij->i", offset, offset)
-        normal = 1.0 - np.einsum("ij,ij->i", voxel_normals[target], normals[label])
+        normal = 1.0 - np.einsum("ij,ij->i", np.take(voxel_normals, target, axis=0), np.take(normals, label, axis=0))
         distance = spatial_weight * spatial + normal_weight * normal**2
-        better = distance < best[target]
-        target, label, distance = target[better], label[better], distance[better]
+        better = distance < np.take(best, target)
+        # np.compress: much faster than boolean-mask indexing.
+        target, label, distance = (np.compress(better, x) for x in (target, label, distance))
         np.minimum.at(best, target, distance)
-        won = distance == best[target]
-        target = target[won]
-        labels[target] = label[won]
+        won = distance == np.take(best, target)
+        target = np.compress(won, target)
+        labels[target] = np.compress(won, label)
         # The voxels that changed, in increasing order (as np.unique would give them).
         reached[target] = True
         frontier = np.flatnonzero(reached)
