@@ -32,6 +32,9 @@ from dmg_planner.shape import Shape
 from dmg_planner.supervoxels import vccs
 
 FORMAT_VERSION = 1
+# Bump when a code change alters the graphs built from the same input: it is part of the
+# cache key, so no planner serves a graph built by older code.
+ALGORITHM_VERSION = 2
 
 
 @dataclass

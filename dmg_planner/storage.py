@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dmg_planner.graph import FORMAT_VERSION, DexterousManipulationGraph, GraphParameters
+from dmg_planner.graph import ALGORITHM_VERSION, FORMAT_VERSION, DexterousManipulationGraph, GraphParameters
 
 ARRAYS = ("mesh_vertices", "mesh_triangles", "positions", "normals", "references", "vertex_component",
           "graph_edges", "admissible", "node_vertex", "node_angles", "node_component", "node_edges",
@@ -28,7 +28,8 @@ class GraphFileError(ValueError):
 
 
 def cache_key(source_hash: str, parameters: GraphParameters) -> str:
-    text = json.dumps({"source": source_hash, "parameters": parameters.as_dict(), "format": FORMAT_VERSION},
+    text = json.dumps({"source": source_hash, "parameters": parameters.as_dict(), "format": FORMAT_VERSION,
+                       "algorithm": ALGORITHM_VERSION},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
