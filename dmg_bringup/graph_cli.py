@@ -196,22 +196,20 @@ def cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
+def emit_report(report: dict, output: str | None, as_json: bool, summary: str) -> None:
+    """Write a benchmark report as JSON to `output` (if given); print JSON or the summary."""
+    text = json.dumps(report, indent=2)
+    if output:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+        Path(output).write_text(text + "\n")
+    print(text if as_json else summary + (f"\nwrote {output}" if output else ""))
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
-    from dmg_planner.benchmark import run_benchmark
+    from dmg_planner.benchmark import format_report, run_benchmark
 
     report = run_benchmark(args.objects or ["box"], args.seeds, args.queries)
-    text = json.dumps(report, indent=2)
-    if args.output:
-        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(text + "\n")
-    if args.json:
-        print(text)
-    else:
-        from dmg_planner.benchmark import format_report
-
-        print(format_report(report))
-        if args.output:
-            print(f"wrote {args.output}")
+    emit_report(report, args.output, args.json, format_report(report))
     return 0
 
 

@@ -10,14 +10,12 @@ until all shipped objects answer, with an empty graph cache (cold) and from the 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -160,24 +158,23 @@ def _wait_until_ready(node, client, request, timeout: float = 60.0) -> None:
     raise RuntimeError("the planner never became ready")
 
 
-def command(args: argparse.Namespace) -> int:
-    report = run(args.calls)
-    text = json.dumps(report, indent=2)
-    if args.output:
-        Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(text + "\n")
-    if args.json:
-        print(text)
-    else:
-        for name in ("planner", "echo", "planning_inside_node"):
-            r = report[name]
-            print(f"{name:22s} p50 {r['p50_ms']:7.2f} ms  p95 {r['p95_ms']:7.2f} ms  max {r['max_ms']:7.2f} ms")
-        print(f"start-up until box, plug and bracket answer: cold (empty cache) {report['startup_s']['cold']:.2f} s, "
-              f"warm (from cache) {report['startup_s']['warm']:.2f} s")
-        adds = report["planner_adds"]
-        print(f"planner adds over echo: p50 {adds['p50_ms']:.2f} ms, p95 {adds['p95_ms']:.2f} ms "
+def format_report(report: dict) -> str:
+    lines = [f"{name:22s} p50 {report[name]['p50_ms']:7.2f} ms  p95 {report[name]['p95_ms']:7.2f} ms  "
+             f"max {report[name]['max_ms']:7.2f} ms" for name in ("planner", "echo", "planning_inside_node")]
+    adds = report["planner_adds"]
+    lines += [f"start-up until box, plug and bracket answer: cold (empty cache) {report['startup_s']['cold']:.2f} s, "
+              f"warm (from cache) {report['startup_s']['warm']:.2f} s",
+              f"planner adds over echo: p50 {adds['p50_ms']:.2f} ms, p95 {adds['p95_ms']:.2f} ms "
               f"(goal < 5 ms at p95: {'met' if report['goal_adds_under_5ms_p95'] else 'MISSED'}); "
-              f"{report['failures']} of {report['calls']} calls failed")
+              f"{report['failures']} of {report['calls']} calls failed"]
+    return "\n".join(lines)
+
+
+def command(args: argparse.Namespace) -> int:
+    from dmg_bringup.graph_cli import emit_report
+
+    report = run(args.calls)
+    emit_report(report, args.output, args.json, format_report(report))
     return 0 if report["failures"] == 0 else 1
 
 
