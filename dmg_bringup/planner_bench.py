@@ -56,9 +56,10 @@ def _percentiles(values: list[float]) -> dict[str, float]:
             "mean_ms": float(array.mean()), "max_ms": float(array.max())}
 
 
-def run(calls: int) -> dict:
+def run(calls: int, seed_resolution: float) -> dict:
     apply_ros_environment()
     import rclpy
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
 
     from dmg_interfaces.srv import PlanRepositioning
@@ -69,13 +70,15 @@ def run(calls: int) -> dict:
     cache = tempfile.mkdtemp(prefix="dmg_bench_")
     env = ros_environment()
     planner_command = [sys.executable, "-m", "dmg_bringup.cli", "run", "dmg_planner", "planner_node", "--ros-args",
-                       "-p", f"cache_dir:={cache}"]
+                       "-p", f"cache_dir:={cache}", "-p", f"graph.seed_resolution:={seed_resolution}"]
     children: list[subprocess.Popen] = []
     model = load_object("box")
-    graph = build_graph(model.load_shape(0.001), GraphParameters(seed_resolution=model.seed_resolution))
+    graph = build_graph(model.load_shape(0.001), GraphParameters(seed_resolution=seed_resolution))
     rng = np.random.default_rng(0)
     rclpy.init()
     node = rclpy.create_node("planner_bench")
+    executor = SingleThreadedExecutor()  # one executor for every call: a new one per call costs ms
+    executor.add_node(node)
     try:
         clients = {name: node.create_client(PlanRepositioning, service, qos_profile=QoSProfile(depth=10))
                    for name, service in (("planner", "/plan_repositioning"), ("echo", ECHO_SERVICE))}
@@ -88,12 +91,12 @@ def run(calls: int) -> dict:
             if not clients["planner"].wait_for_service(timeout_sec=60):
                 raise RuntimeError("planner service did not appear")
             for name in ("box", "plug", "bracket"):
-                _wait_until_ready(node, clients["planner"], PlanRepositioning.Request(object_id=name))
+                _wait_until_ready(executor, clients["planner"], PlanRepositioning.Request(object_id=name))
             startup[kind] = time.perf_counter() - began
             if kind == "cold":
                 _stop(children.pop())
                 while clients["planner"].service_is_ready():
-                    rclpy.spin_once(node, timeout_sec=0.1)
+                    executor.spin_once(timeout_sec=0.1)
         children.append(subprocess.Popen([sys.executable, "-c", "from dmg_bringup.planner_bench import echo_server; "
                                           "echo_server()"], env=env, start_new_session=True, stdout=subprocess.DEVNULL))
         if not clients["echo"].wait_for_service(timeout_sec=60):
@@ -109,21 +112,22 @@ def run(calls: int) -> dict:
                 message.orientation.x, message.orientation.y, message.orientation.z, message.orientation.w = map(
                     float, pose.quaternion)
             requests.append(request)
-        _wait_until_ready(node, clients["planner"], requests[0])
+        _wait_until_ready(executor, clients["planner"], requests[0])
         times: dict[str, list[float]] = {"planner": [], "echo": []}
         planning, failures = [], 0
         for request in requests:
             for name, client in clients.items():
                 began = time.perf_counter()
                 future = client.call_async(request)
-                rclpy.spin_until_future_complete(node, future, timeout_sec=10)
+                executor.spin_until_future_complete(future, timeout_sec=10)
                 times[name].append(time.perf_counter() - began)
                 if name == "planner":
                     response = future.result()
                     failures += response is None or not response.success
                     if response is not None and response.success:
                         planning.append(response.plan.planning_time)
-        report = {"calls": calls, "failures": failures, "startup_s": startup, "planner": _percentiles(times["planner"]),
+        report = {"calls": calls, "failures": failures, "startup_s": startup, "seed_resolution": seed_resolution,
+                  "box_supervoxels": graph.statistics()["supervoxels"], "planner": _percentiles(times["planner"]),
                   "echo": _percentiles(times["echo"]), "planning_inside_node": _percentiles(planning)}
         report["planner_adds"] = {key: report["planner"][key] - report["echo"][key] for key in ("p50_ms", "p95_ms")}
         report["goal_adds_under_5ms_p95"] = report["planner_adds"]["p95_ms"] < 5.0
@@ -144,14 +148,12 @@ def _stop(child: subprocess.Popen) -> None:
         child.wait()
 
 
-def _wait_until_ready(node, client, request, timeout: float = 60.0) -> None:
+def _wait_until_ready(executor, client, request, timeout: float = 60.0) -> None:
     """Call until the planner answers something other than NOT_READY (its graph is built)."""
-    import rclpy
-
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         future = client.call_async(request)
-        rclpy.spin_until_future_complete(node, future, timeout_sec=10)
+        executor.spin_until_future_complete(future, timeout_sec=10)
         if future.result() is not None and future.result().error_code != future.result().NOT_READY:
             return
         time.sleep(0.2)
@@ -159,7 +161,8 @@ def _wait_until_ready(node, client, request, timeout: float = 60.0) -> None:
 
 
 def format_report(report: dict) -> str:
-    lines = [f"{name:22s} p50 {report[name]['p50_ms']:7.2f} ms  p95 {report[name]['p95_ms']:7.2f} ms  "
+    lines = [f"box graph: {report['box_supervoxels']} supervoxels (seed {report['seed_resolution']} m)"]
+    lines += [f"{name:22s} p50 {report[name]['p50_ms']:7.2f} ms  p95 {report[name]['p95_ms']:7.2f} ms  "
              f"max {report[name]['max_ms']:7.2f} ms" for name in ("planner", "echo", "planning_inside_node")]
     adds = report["planner_adds"]
     lines += [f"start-up until box, plug and bracket answer: cold (empty cache) {report['startup_s']['cold']:.2f} s, "
@@ -173,7 +176,7 @@ def format_report(report: dict) -> str:
 def command(args: argparse.Namespace) -> int:
     from dmg_bringup.graph_cli import emit_report
 
-    report = run(args.calls)
+    report = run(args.calls, args.seed_resolution)
     emit_report(report, args.output, args.json, format_report(report))
     return 0 if report["failures"] == 0 else 1
 
@@ -184,6 +187,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = verbs.add_parser("planner", help="planner_node service latency beside an echo service", description=__doc__,
                          formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--calls", type=int, default=500, help="calls per service")
+    p.add_argument("--seed-resolution", type=float, default=0.016,
+                   help="graph seed resolution of the planner (default 0.016: the box has ~120 supervoxels, "
+                        "the size the latency goal names)")
     p.add_argument("-o", "--output", help="write the JSON report here")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=command)
