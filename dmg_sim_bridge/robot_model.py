@@ -66,7 +66,7 @@ def arm_mjcf(side: str, robot: dict) -> str:
         xml.append(f'<body name="{side}_{joint["name"]}_link" pos="{_vector(origin.xyz)}" '
                    f'quat="{_vector(origin.quaternion_wxyz)}">'
                    f'<joint name="{side}_{joint["name"]}" axis="0 0 1" range="{joint["lower"]} {joint["upper"]}" '
-                   f'actuatorfrcrange="{-joint["effort"]} {joint["effort"]}" damping="1"/>'
+                   f'actuatorfrcrange="{-joint["effort"]} {joint["effort"]}" damping="{robot["joint_damping"]}"/>'
                    f'<inertial pos="0 0 0" mass="{joint["mass"]}" diaginertia="{inertia} {inertia} {inertia}"/>'
                    f'<geom type="capsule" fromto="0 0 0 {_vector(following)}" size="{LINK_RADIUS}" '
                    f'rgba="0.6 0.1 0.1 1" contype="0" conaffinity="0" group="2"/>')

@@ -1,0 +1,63 @@
+"""Real MuJoCo physics: the closed gripper holds a shipped object still against gravity."""
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from dmg_planner.objects import load_object
+from dmg_sim_bridge.gripper import gripper_mjcf
+from dmg_sim_bridge.object_model import object_mjcf
+from dmg_sim_bridge.sim_config import gripper_spec, load_sim_config, option_xml
+
+
+def held_box_scene(tmp_path, force: float):
+    config = load_sim_config()
+    spec = gripper_spec(config)
+    spec = type(spec)(**{**spec.__dict__, "max_force": force})
+    fingers, actuators = gripper_mjcf("g1", spec)
+    model = load_object("box")
+    friction = " ".join(map(str, spec.friction))
+    assets, body = object_mjcf(model, tmp_path / "textures", position=(0, 0, 0.5 - spec.finger_length),
+                               geom_defaults=f'condim="6" friction="{friction}"')
+    # Hand pointing down, grasp axis along world y: the fingers pinch the box's 60 mm faces.
+    x, y, z, w = Rotation.from_euler("xz", [180, 90], degrees=True).as_quat()
+    xml = (f'<mujoco><compiler angle="radian"/>{option_xml(config)}<asset>{assets}</asset><worldbody>'
+           f'<body name="hand" pos="0 0 0.5" quat="{w} {x} {y} {z}">{fingers}</body>{body}</worldbody>'
+           f'<actuator>{actuators}</actuator></mujoco>')
+    mj_model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(mj_model)
+    for finger in ("g1_finger0", "g1_finger1"):
+        data.joint(finger).qpos = 0.03 + spec.tip_radius
+    data.ctrl[:] = 0.0   # target inside the object: each finger squeezes with its force limit
+    mujoco.mj_forward(mj_model, data)
+    return mj_model, data
+
+
+def object_in_grasp(data) -> tuple[np.ndarray, Rotation]:
+    site = data.site("g1_grasp")
+    rotation = site.xmat.reshape(3, 3)
+    position = (data.body("object").xpos - site.xpos) @ rotation
+    return position, Rotation.from_matrix(rotation.T @ data.body("object").xmat.reshape(3, 3))
+
+
+def test_closed_grip_holds_the_box_within_1mm_and_1deg_for_10s(tmp_path):
+    model, data = held_box_scene(tmp_path, force=15.0)
+    for _ in range(int(1.0 / model.opt.timestep)):       # settle
+        mujoco.mj_step(model, data)
+    start_position, start_rotation = object_in_grasp(data)
+    for _ in range(int(10.0 / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+    position, rotation = object_in_grasp(data)
+    assert np.linalg.norm(position - start_position) < 0.001
+    assert np.rad2deg((start_rotation.inv() * rotation).magnitude()) < 1.0
+
+
+def test_a_grip_too_weak_for_the_weight_lets_the_box_slide_out(tmp_path):
+    # 0.1 kg needs 2 * 0.8 * F >= 0.98 N, i.e. F >= 0.61 N per finger; 0.3 N cannot hold it.
+    model, data = held_box_scene(tmp_path, force=0.3)
+    start = data.body("object").xpos.copy()
+    for _ in range(int(1.0 / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+    assert start[2] - data.body("object").xpos[2] > 0.01
