@@ -15,6 +15,8 @@ import pytest
 # (and other ROS users on the network) never see each other's nodes.
 os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# MuJoCo picks its GL backend when first imported: headless EGL before any test imports it.
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 from dmg_bringup.environment import apply_ros_environment  # noqa: E402
 

@@ -1,18 +1,14 @@
 """Shipped objects in MuJoCo: mass from config, and tags a camera really sees where the layout says."""
 from __future__ import annotations
 
-import os
+import cv2
+import mujoco
+import numpy as np
+import pytest
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from dmg_perception.tags import detector, tag_corners, tag_pose  # noqa: E402
-from dmg_planner.objects import load_object, object_names  # noqa: E402
-from dmg_sim_bridge.object_model import object_mjcf  # noqa: E402
+from dmg_perception.tags import detector, tag_corners, tag_pose
+from dmg_planner.objects import load_object, object_names
+from dmg_sim_bridge.object_model import object_mjcf
 
 WIDTH, HEIGHT, FOVY = 640, 480, 45.0
 DISTANCE = 0.2
