@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,26 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from dmg_bringup.graph_cli import plan_summary, print_plan
 from dmg_planner.graph_parameters import GraphParameters
-from dmg_planner.objects import load_object, object_names
-
-
-def _graph(name: str, cache):
-    from dmg_planner.graph import build_graph
-    from dmg_planner.storage import cache_key
-
-    model = load_object(name)
-    parameters = GraphParameters(seed_resolution=model.seed_resolution)
-    began = time.perf_counter()
-    shape = model.load_shape(parameters.voxel_resolution)
-    key = cache_key(shape.source_hash, parameters)
-    graph = cache.load(key) if cache else None
-    source = "cache"
-    if graph is None:
-        graph = build_graph(shape, parameters)
-        source = "built"
-        if cache:
-            cache.save(key, graph)
-    return graph, source, time.perf_counter() - began
+from dmg_planner.objects import object_names
 
 
 def _demo_pair(result) -> tuple[int, int]:
@@ -58,15 +39,21 @@ def _demo_pair(result) -> tuple[int, int]:
 def run_demo(args: argparse.Namespace) -> int:
     from dmg_planner.manipulability import manipulability_matrix, save_matrix
     from dmg_planner.pictures import draw_graph
+    from dmg_planner.library import ObjectLibrary
     from dmg_planner.search import GripperPose, SearchOptions, plan
-    from dmg_planner.storage import GraphCache
 
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
-    cache = GraphCache(args.cache_dir) if args.cache_dir else None
+    # The planner's own object handling: the objects' seed resolutions, the graph cache.
+    library = ObjectLibrary(replace(GraphParameters(), seed_resolution=0.0), SearchOptions(), args.cache_dir or None)
     summary = {}
     for name in args.objects or object_names():
-        graph, source, seconds = _graph(name, cache)
+        loaded = library.load_config_object(name, wait=True)
+        if loaded.entry is None or loaded.entry.graph is None:
+            print(f"\n== {name}: {loaded.message}")
+            return 1
+        graph, seconds = loaded.entry.graph, loaded.entry.build_time
+        source = "cache" if loaded.entry.from_cache else "built"
         stats = graph.statistics()
         print(f"\n== {name}: graph {source} in {seconds * 1000:.0f} ms: {stats['supervoxels']} supervoxels, "
               f"{stats['dmg_nodes']} DMG nodes, {stats['dmg_edges']} edges, {stats['dmg_components']} components")
@@ -88,6 +75,7 @@ def run_demo(args: argparse.Namespace) -> int:
                          "plan": plan_summary(result), "picture": str(picture)}
         if not result.success:
             print(f"   plan failed: {result.message}")
+    library.shutdown()
     (output / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     print(f"\nsummary: {output / 'summary.json'}")
     return 0 if all(entry["plan"]["status"] == "OK" for entry in summary.values()) else 1

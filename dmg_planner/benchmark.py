@@ -10,12 +10,12 @@ import platform
 import time
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from dmg_planner.graph import GraphParameters, build_graph
 from dmg_planner.manipulability import manipulability_matrix
 from dmg_planner.objects import load_object
-from dmg_planner.search import SearchOptions, plan, GripperPose
-from scipy.spatial.transform import Rotation
+from dmg_planner.search import GripperPose, SearchOptions, plan
 
 REPEATS = 3
 

@@ -158,7 +158,8 @@ def _reach(graph: DexterousManipulationGraph) -> float:
 
 
 def secondary_contacts(graph: DexterousManipulationGraph, points: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where grasp lines through `points` along `axis` meet the object on the secondary side.
+    """Where grasp lines through `points` along `axis` (one, or one per point) meet the object
+    on the secondary side.
 
     The secondary finger comes from outside, so its contact is the first surface point seen
     from far out along +axis looking back. Returns (points, hit mask).
@@ -246,7 +247,7 @@ def locate_grasps(graph: DexterousManipulationGraph, positions: np.ndarray, rota
     finger_direction = -z
     reach = _reach(graph) + np.linalg.norm(positions - graph.mesh_vertices.mean(axis=0), axis=1, keepdims=True)
     contact, hit = _cast(graph, positions - reach * axis, np.ascontiguousarray(axis))
-    secondary, _ = _cast(graph, contact + 2 * reach * axis, np.ascontiguousarray(-axis))
+    secondary, _ = secondary_contacts(graph, contact, axis)
     fault = np.where(hit, GraspFault.NONE, GraspFault.MISSES_OBJECT)
     # Both fingers' contacts in one query: principal rows first, then secondary rows.
     count = len(positions)

@@ -42,17 +42,6 @@ class Shape:
     def extent(self) -> np.ndarray:
         return self.vertices.max(axis=0) - self.vertices.min(axis=0)
 
-    def triangle_mesh(self) -> o3d.t.geometry.TriangleMesh:
-        mesh = o3d.t.geometry.TriangleMesh()
-        mesh.vertex.positions = o3d.core.Tensor(self.vertices.astype(np.float32))
-        mesh.triangle.indices = o3d.core.Tensor(self.triangles.astype(np.int32))
-        return mesh
-
-    def raycasting_scene(self) -> o3d.t.geometry.RaycastingScene:
-        scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(self.triangle_mesh())
-        return scene
-
 
 def file_hash(path: Path, units: str) -> str:
     digest = hashlib.sha256(path.read_bytes())
