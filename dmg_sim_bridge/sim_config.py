@@ -1,23 +1,97 @@
-"""config/sim.yaml: the cell's physics options and gripper, as MJCF and GripperSpec."""
+"""config/sim.yaml: the cell's physics, gripper, arms, control and camera, as typed values."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 import yaml
+from scipy.spatial.transform import Rotation
 
 from dmg_planner.objects import config_dir
+from dmg_planner.transforms import from_rotation
 from dmg_sim_bridge.gripper import GripperSpec
 
-
-def load_sim_config() -> dict:
-    return yaml.safe_load((config_dir() / "sim.yaml").read_text())
+ARM_ROLES = ("arm1", "arm2")
 
 
-def option_xml(config: dict) -> str:
-    physics = config["physics"]
-    return (f'<option timestep="{physics["timestep"]}" cone="{physics["cone"]}" impratio="{physics["impratio"]}" '
-            f'noslip_iterations="{physics["noslip_iterations"]}"/>')
+@dataclass(frozen=True)
+class ControlSpec:
+    dls_damping: float
+    singular_threshold: float
+    joint_limit_margin: float
+    max_linear_speed: float
+    max_angular_speed: float
+    watchdog: float
+    joint_kp_per_effort: float
+    joint_kv_per_effort: float
+    armature: float
 
 
-def gripper_spec(config: dict) -> GripperSpec:
-    values = dict(config["gripper"])
-    values["friction"] = tuple(values["friction"])
-    return GripperSpec(**values)
+@dataclass(frozen=True)
+class CameraSpec:
+    arm: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    rate: float
+    near: float
+    far: float
+
+    def intrinsic_matrix(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    document: dict
+    gripper: GripperSpec
+    control: ControlSpec
+    camera: CameraSpec
+    arms: dict[str, str]             # role -> Baxter side
+    home: dict[str, np.ndarray]      # role -> 4x4 grasp-frame pose in the base frame
+    ik_seed: np.ndarray
+    object: str
+    settle_time: float
+    settle_position_tolerance: float
+    settle_angle_tolerance: float    # rad
+
+    def option_xml(self) -> str:
+        physics = self.document["physics"]
+        return (f'<option timestep="{physics["timestep"]}" cone="{physics["cone"]}" impratio="{physics["impratio"]}" '
+                f'noslip_iterations="{physics["noslip_iterations"]}" integrator="implicitfast"/>')
+
+    @property
+    def timestep(self) -> float:
+        return float(self.document["physics"]["timestep"])
+
+    @property
+    def table(self) -> dict:
+        return self.document["table"]
+
+
+def _pose(entry: dict) -> np.ndarray:
+    return from_rotation(Rotation.from_euler("xyz", entry["rpy_deg"], degrees=True).as_matrix(), entry["xyz"])
+
+
+def load_sim_config(path: Path | None = None) -> SimConfig:
+    path = path or config_dir() / "sim.yaml"
+    document = yaml.safe_load(Path(path).read_text())
+    gripper = dict(document["gripper"])
+    gripper["friction"] = tuple(gripper["friction"])
+    arms = dict(document["arms"])
+    if sorted(arms) != list(ARM_ROLES) or sorted(arms.values()) != ["left", "right"]:
+        raise ValueError(f"{path}: arms must map arm1 and arm2 to left and right, got {arms}")
+    camera = CameraSpec(**document["camera"])
+    if camera.arm not in ARM_ROLES:
+        raise ValueError(f"{path}: camera.arm must be one of {ARM_ROLES}, got {camera.arm!r}")
+    tolerance = document["settle_tolerance"]
+    return SimConfig(
+        document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**document["control"]),
+        camera=camera, arms=arms, home={role: _pose(document["home"][role]) for role in ARM_ROLES},
+        ik_seed=np.asarray(document["ik_seed"], float), object=str(document["object"]),
+        settle_time=float(document["settle_time"]), settle_position_tolerance=float(tolerance["position"]),
+        settle_angle_tolerance=float(np.deg2rad(tolerance["angle_deg"])))

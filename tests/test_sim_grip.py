@@ -9,23 +9,23 @@ from scipy.spatial.transform import Rotation
 from dmg_planner.objects import load_object
 from dmg_sim_bridge.gripper import gripper_mjcf
 from dmg_sim_bridge.object_model import object_mjcf
-from dmg_sim_bridge.sim_config import gripper_spec, load_sim_config, option_xml
+from dmg_sim_bridge.sim_config import load_sim_config
 
 
 def held_box_scene(tmp_path, force: float):
     config = load_sim_config()
-    spec = gripper_spec(config)
+    spec = config.gripper
     spec = type(spec)(**{**spec.__dict__, "max_force": force})
-    fingers, actuators = gripper_mjcf("g1", spec)
+    gripper = gripper_mjcf("g1", spec)
     model = load_object("box")
     friction = " ".join(map(str, spec.friction))
     assets, body = object_mjcf(model, tmp_path / "textures", position=(0, 0, 0.5 - spec.finger_length),
                                geom_defaults=f'condim="6" friction="{friction}"')
     # Hand pointing down, grasp axis along world y: the fingers pinch the box's 60 mm faces.
     x, y, z, w = Rotation.from_euler("xz", [180, 90], degrees=True).as_quat()
-    xml = (f'<mujoco><compiler angle="radian"/>{option_xml(config)}<asset>{assets}</asset><worldbody>'
-           f'<body name="hand" pos="0 0 0.5" quat="{w} {x} {y} {z}">{fingers}</body>{body}</worldbody>'
-           f'<actuator>{actuators}</actuator></mujoco>')
+    xml = (f'<mujoco><compiler angle="radian"/>{config.option_xml()}<asset>{assets}</asset><worldbody>'
+           f'<body name="hand" pos="0 0 0.5" quat="{w} {x} {y} {z}">{gripper.bodies}</body>{body}</worldbody>'
+           f'<actuator>{gripper.actuators}</actuator><equality>{gripper.equality}</equality></mujoco>')
     mj_model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(mj_model)
     for finger in ("g1_finger0", "g1_finger1"):

@@ -1,0 +1,152 @@
+"""The whole simulated cell with real MuJoCo physics and rendering: holding, arm velocity
+control, watchdog, pushes in a loosened grasp, the wrist camera, and refused resets."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from dmg_perception.tags import detector, tag_corners
+from dmg_planner.objects import load_object, object_names
+from dmg_planner.transforms import distance, invert
+from dmg_sim_bridge.cell import Cell, CellError
+
+PUSH_SPEED = 0.01   # m/s
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    cell = Cell(workdir=tmp_path_factory.mktemp("cell"))
+    yield cell
+    cell.close()
+
+
+def move_to(cell: Cell, role: str, target: np.ndarray, speed: float, tolerance: float = 2e-4) -> None:
+    """Drive gripper `role` to a position with velocity commands (a P loop at 100 Hz), then stop."""
+    for _ in range(20000):
+        error = target - cell.grasp_pose(role)[:3, 3]
+        if np.linalg.norm(error) < tolerance:
+            break
+        velocity = 5.0 * error
+        velocity *= min(1.0, speed / np.linalg.norm(velocity))
+        cell.command_twist(role, velocity, np.zeros(3))
+        cell.run(0.01)
+    else:
+        raise AssertionError(f"{role} did not reach {target}")
+    cell.stop(role)
+    cell.run(0.1)
+
+
+def test_closed_grip_holds_the_object_within_1mm_and_1deg_for_10s(cell):
+    cell.reset()
+    start = cell.object_in_gripper("arm1")
+    cell.run(10.0)
+    moved, turned = distance(start, cell.object_in_gripper("arm1"))
+    assert moved < 0.001 and np.rad2deg(turned) < 1.0
+
+
+@pytest.mark.parametrize("linear, angular", [((0.05, 0, 0), (0, 0, 0)), ((0, -0.04, 0.03), (0, 0, 0)),
+                                             ((0, 0, 0), (0.3, 0, 0)), ((0.02, 0, 0), (0, 0, -0.2))])
+def test_cartesian_velocity_command_moves_the_gripper_at_that_velocity_within_5_percent(cell, linear, angular):
+    cell.reset()
+    twist = np.array([*linear, *angular], float)
+    for _ in range(10):                       # 0.1 s to get up to speed (servo lag 25 ms)
+        cell.command_twist("arm2", linear, angular)
+        cell.run(0.01)
+    before, start = cell.grasp_pose("arm2"), cell.time
+    for _ in range(30):
+        cell.command_twist("arm2", linear, angular)
+        cell.run(0.01)
+    after, elapsed = cell.grasp_pose("arm2"), cell.time - start
+    measured = np.concatenate([(after[:3, 3] - before[:3, 3]) / elapsed,
+                               Rotation.from_matrix(after[:3, :3] @ before[:3, :3].T).as_rotvec() / elapsed])
+    assert np.linalg.norm(measured - twist) <= 0.05 * np.linalg.norm(twist), (measured, twist)
+
+
+def test_watchdog_stops_an_arm_whose_commands_stop(cell):
+    cell.reset()
+    for _ in range(20):
+        cell.command_twist("arm2", (0.05, 0, 0), (0, 0, 0))
+        cell.run(0.01)
+    last_command = cell.grasp_pose("arm2")[:3, 3]
+    cell.run(0.2)                              # watchdog 0.1 s, then the servo settles
+    stopped = cell.grasp_pose("arm2")[:3, 3]
+    cell.run(1.0)
+    assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - stopped) < 1e-4
+    # It moved on for at most the watchdog time plus the servo lag (0.05 m/s x 0.15 s = 7.5 mm).
+    assert np.linalg.norm(stopped - last_command) < 0.0075
+
+
+def push_from_below(cell: Cell, lateral_offset: float, gap: float, travel: float, grip: float):
+    """Loosen gripper 1 to `grip` N, push the held box's lower end upwards with gripper 2's
+    closed fingertips, `lateral_offset` off the end's centre along the base y; tighten again.
+    Returns (object in gripper 1 before, after)."""
+    cell.reset(object_name="box")
+    tip_radius = cell.config.gripper.tip_radius
+    obj = cell.object_pose()
+    lower_end = obj[:3, 3] + 0.05 * obj[:3, 0]          # the default grasp puts the box's x down
+    assert lower_end[2] < obj[2, 3]
+    start = lower_end + np.array([0.0, lateral_offset, -(tip_radius + gap)])
+    move_to(cell, "arm2", start, speed=0.05)
+    cell.command_gripper("arm1", 0.0, grip)
+    before = cell.object_in_gripper("arm1")
+    move_to(cell, "arm2", start + np.array([0, 0, travel]), speed=PUSH_SPEED)
+    cell.command_gripper("arm1", 0.0, 15.0)
+    cell.run(0.3)
+    return before, cell.object_in_gripper("arm1")
+
+
+def test_push_with_loosened_grip_translates_the_object_by_the_pushed_distance(cell):
+    gap, travel = 0.01, 0.03
+    before, after = push_from_below(cell, lateral_offset=0.0, gap=gap, travel=travel, grip=2.0)
+    shift = after[:3, 3] - before[:3, 3]
+    # Pushed upwards = towards gripper 1's palm = its -z, by the travel after contact.
+    assert shift[2] == pytest.approx(-(travel - gap), abs=0.003)
+    assert np.hypot(shift[0], shift[1]) < 0.003
+    assert np.rad2deg(distance(before, after)[1]) < 2.0
+
+
+def test_off_centre_push_pivots_the_object_about_the_grasp_axis(cell):
+    before, after = push_from_below(cell, lateral_offset=0.015, gap=0.01, travel=0.03, grip=2.0)
+    turn = Rotation.from_matrix(after[:3, :3] @ before[:3, :3].T).as_rotvec(degrees=True)   # gripper 1 frame
+    assert abs(turn[0]) > 5.0                       # about the grasp axis (gripper x)
+    assert np.hypot(turn[1], turn[2]) < 1.0         # and about nothing else
+    assert abs(after[0, 3] - before[0, 3]) < 0.001  # still centred between the fingers
+
+
+@pytest.mark.parametrize("name", object_names())
+def test_wrist_camera_sees_the_held_objects_tags_where_its_pose_and_intrinsics_say(cell, name):
+    cell.reset(object_name=name)
+    image = cell.render()
+    assert image.shape == (cell.config.camera.height, cell.config.camera.width, 3)
+    corners, ids, _ = detector().detectMarkers(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY))
+    assert ids is not None, f"no tag of {name} seen from the default pose"
+    camera_from_object = invert(cell.camera_pose()) @ cell.object_pose()
+    intrinsics = cell.config.camera.intrinsic_matrix()
+    tags = {tag.id: tag for tag in load_object(name).apriltags}
+    for found, tag_id in zip(corners, ids.ravel()):
+        points = tag_corners(tags[int(tag_id)]) @ camera_from_object[:3, :3].T + camera_from_object[:3, 3]
+        projected = (points / points[:, 2:]) @ intrinsics.T
+        assert np.max(np.abs(found[0] - projected[:, :2])) < 1.0, (name, tag_id)
+
+
+def test_bad_resets_are_refused_with_a_reason_and_keep_the_scene(cell):
+    cell.reset(object_name="box")
+    cell.run(0.2)
+    kept = cell.object_pose()
+    far_away = np.eye(4)
+    far_away[:3, 3] = [0.0, 0.3, 0.0]
+    nan_pose = np.full((4, 4), np.nan)
+    wide = np.eye(4)          # the box's 100 mm side across the fingers (they open 120 mm) is fine...
+    for kwargs, reason in [({"object_name": "no_such_object"}, "unknown object"),
+                           ({"object_in_gripper": nan_pose}, "non-finite"),
+                           ({"object_in_gripper": far_away}, "no surface on gripper 1's grasp axis"),
+                           ({"grip_force": 0.3}, "did not stay in gripper 1"),
+                           ({"grip_force": 99.0}, "outside")]:
+        with pytest.raises(CellError, match=reason):
+            cell.reset(**kwargs)
+        assert cell.object.name == "box"
+        assert np.allclose(cell.object_pose(), kept)
+    cell.reset(object_in_gripper=wide)            # ...and gives a valid grasp
+    assert cell.opening("arm1") == pytest.approx(0.100, abs=0.002)
