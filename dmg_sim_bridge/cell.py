@@ -64,6 +64,14 @@ class ResetResult:
 
 
 @dataclass
+class GripperStatus:
+    opening: float          # m between the fingertips' inner surfaces
+    target_opening: float   # m, last commanded
+    max_force: float        # N per finger, in effect
+    force: float            # N per finger, applied now
+
+
+@dataclass
 class JointState:
     names: list[str]
     position: np.ndarray
@@ -167,6 +175,14 @@ class Cell:
     def opening(self, role: str) -> float:
         """Distance between the fingertips' inner surfaces [m]."""
         return float(np.sum(self.data.qpos[self.arms[role].finger_qpos]) - 2 * self.config.gripper.tip_radius)
+
+    def gripper_status(self, role: str) -> GripperStatus:
+        arm = self._arm(role)
+        spec = self.config.gripper
+        target = float(np.mean(self.data.ctrl[arm.finger_actuators]))
+        return GripperStatus(self.opening(role), 2 * (target - spec.tip_radius),
+                             float(self.model.actuator_forcerange[arm.finger_actuators[0], 1]),
+                             float(np.mean(np.abs(self.data.actuator_force[arm.finger_actuators]))))
 
     def joint_state(self) -> JointState:
         names, addresses, dofs = [], [], []
@@ -331,6 +347,7 @@ class Cell:
         try:
             object_model, model = self._model_for(object_name or self.config.object)
             self._bind(object_model, model)
+            self.data.time = previous[2].time if previous else 0.0   # simulated time never runs backwards
             return self._place(object_in_gripper, grip_force or spec.max_force)
         except CellError:
             if previous is not None:

@@ -37,7 +37,6 @@ class CameraSpec:
     fy: float
     cx: float
     cy: float
-    rate: float
     near: float
     far: float
 

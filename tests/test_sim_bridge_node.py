@@ -1,0 +1,228 @@
+"""sim_bridge_node as a user runs it: a separate process, driven and watched over real DDS."""
+from __future__ import annotations
+
+import math
+import subprocess
+import time
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from conftest import DMG, Processes
+from dmg_perception.tags import detector
+
+pytestmark = pytest.mark.ros
+
+ROLES = ("arm1", "arm2")
+
+
+class CellClient:
+    """An in-test rclpy node (own context) that records the bridge's topics and commands it."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped, TwistStamped
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import CameraInfo, Image, JointState
+
+        from dmg_interfaces.msg import GripperCommand, GripperState
+        from dmg_interfaces.srv import ResetScene
+
+        self.rclpy, self.TwistStamped, self.GripperCommand, self.ResetScene = rclpy, TwistStamped, GripperCommand, ResetScene
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("sim_test_client", context=self.context)
+        self.latest: dict[str, object] = {}
+        self.history: dict[str, list] = {}
+        topics = {"/clock": Clock, "/joint_states": JointState, "/arm2/camera/image_raw": Image,
+                  "/arm2/camera/camera_info": CameraInfo, "/arm2/camera/pose": PoseStamped, "/diagnostics": DiagnosticArray}
+        for role in ROLES:
+            topics[f"/{role}/endpoint_pose"] = PoseStamped
+            topics[f"/{role}/gripper/state"] = GripperState
+            topics[f"/ground_truth/object_in_{role}"] = PoseStamped
+        for topic, kind in topics.items():
+            self.node.create_subscription(kind, topic, lambda msg, topic=topic: self._record(topic, msg), QoSProfile(depth=50))
+        self.twist_pubs = {r: self.node.create_publisher(TwistStamped, f"/{r}/cmd_vel", 10) for r in ROLES}
+        self.gripper_pubs = {r: self.node.create_publisher(GripperCommand, f"/{r}/gripper/command", 10) for r in ROLES}
+        self.reset_client = self.node.create_client(ResetScene, "/sim/reset")
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _record(self, topic: str, msg) -> None:
+        self.latest[topic] = msg
+        if topic.endswith("endpoint_pose") or topic.startswith("/ground_truth") or topic == "/diagnostics":
+            self.history.setdefault(topic, []).append(msg)
+
+    def spin(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_for(self, predicate, timeout: float = 30.0, what: str = "condition"):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.02)
+            value = predicate()
+            if value:
+                return value
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def sim_time(self) -> float:
+        clock = self.wait_for(lambda: self.latest.get("/clock"), what="/clock").clock
+        return clock.sec + clock.nanosec * 1e-9
+
+    def twist(self, role: str, linear, angular=(0.0, 0.0, 0.0), frame_id: str = "base") -> None:
+        msg = self.TwistStamped()
+        msg.header.frame_id = frame_id
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(v) for v in linear)
+        msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = (float(v) for v in angular)
+        self.twist_pubs[role].publish(msg)
+
+    def drive(self, role: str, linear, seconds: float, rate: float = 50.0) -> None:
+        """Publish the same velocity at `rate` Hz for `seconds` of wall time."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.twist(role, linear)
+            self.spin(1.0 / rate)
+
+    def reset(self, **fields):
+        assert self.reset_client.wait_for_service(timeout_sec=30)
+        future = self.reset_client.call_async(self.ResetScene.Request(**fields))
+        return self.wait_for(lambda: future.result() if future.done() else None, timeout=60, what="reset")
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.context)
+
+
+def position(pose_stamped) -> np.ndarray:
+    p = pose_stamped.pose.position
+    return np.array([p.x, p.y, p.z])
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+@pytest.fixture(scope="module")
+def bridge():
+    processes = Processes()
+    process = processes.start([DMG, "run", "dmg_sim_bridge", "sim_bridge_node"], stderr=subprocess.STDOUT)
+    client = CellClient()
+    try:
+        client.wait_for(lambda: client.latest.get("/arm2/camera/image_raw"), timeout=60, what="the first camera image")
+        yield process, client
+    finally:
+        client.close()
+        processes.stop_all()
+
+
+def output_of(process: subprocess.Popen) -> str:
+    return process.stdout.read() if process.poll() is not None else ""
+
+
+def test_publishes_the_cell_state_camera_and_ground_truth(bridge):
+    process, client = bridge
+    start = client.sim_time()
+    client.spin(0.5)
+    assert client.sim_time() > start
+    joints = client.latest["/joint_states"]
+    assert len(joints.name) == 18 and len(joints.position) == 18 and all(map(math.isfinite, joints.position))
+    for role in ROLES:
+        assert client.latest[f"/{role}/endpoint_pose"].header.frame_id == "base"
+        assert client.latest[f"/ground_truth/object_in_{role}"].header.frame_id == f"{role}_gripper"
+    # The default grasp pinches the 100 x 60 x 40 mm box across its 60 mm side, centred.
+    assert client.latest["/arm1/gripper/state"].opening == pytest.approx(0.060, abs=0.001)
+    assert np.linalg.norm(position(client.latest["/ground_truth/object_in_arm1"])) < 0.002
+    image = client.latest["/arm2/camera/image_raw"]
+    info = client.latest["/arm2/camera/camera_info"]
+    assert (image.width, image.height, image.encoding) == (640, 480, "rgb8")
+    assert info.header.frame_id == image.header.frame_id == "arm2_camera_optical"
+    assert info.k[0] > 0 and info.k[2] == pytest.approx(319.5)
+    pixels = np.frombuffer(image.data, np.uint8).reshape(image.height, image.width, 3)
+    _, ids, _ = detector().detectMarkers(cv2.cvtColor(pixels, cv2.COLOR_RGB2GRAY))
+    assert ids is not None and {0, 1} <= set(ids.ravel().tolist())
+
+
+def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
+    _, client = bridge
+    topic = "/arm2/endpoint_pose"
+    client.drive("arm2", (0.0, 0.0, 0.04), seconds=0.3)
+    client.history[topic].clear()
+    client.drive("arm2", (0.0, 0.0, 0.04), seconds=1.0)
+    poses = client.history[topic]
+    velocity = (position(poses[-1]) - position(poses[0])) / (stamp(poses[-1]) - stamp(poses[0]))
+    assert velocity == pytest.approx([0.0, 0.0, 0.04], abs=0.04 * 0.05)
+    client.spin(0.4)                          # no more commands: the watchdog (0.1 s) stops the arm
+    held = position(client.latest[topic])
+    client.spin(0.5)
+    assert np.linalg.norm(position(client.latest[topic]) - held) < 1e-4
+    client.drive("arm2", (0.0, 0.0, -0.04), seconds=1.3)   # back down, clear of the object
+
+
+def test_gripper_command_sets_the_opening(bridge):
+    _, client = bridge
+    client.gripper_pubs["arm2"].publish(client.GripperCommand(opening=0.05, max_force=10.0))
+    state = client.wait_for(lambda: (s := client.latest["/arm2/gripper/state"]).opening > 0.049 and s, what="arm2 open")
+    assert state.target_opening == pytest.approx(0.05) and state.max_force == pytest.approx(10.0)
+    client.gripper_pubs["arm2"].publish(client.GripperCommand(opening=0.0, max_force=0.0))
+    client.wait_for(lambda: client.latest["/arm2/gripper/state"].opening < 0.001, what="arm2 closed")
+
+
+def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
+    process, client = bridge
+    client.spin(0.5)                          # any earlier motion has stopped
+    before = position(client.latest["/arm2/endpoint_pose"])
+    client.twist("arm2", (math.nan, 0.0, 0.0))
+    client.twist("arm2", (0.05, 0.0, 0.0), frame_id="arm2_gripper")
+    client.gripper_pubs["arm1"].publish(client.GripperCommand(opening=5.0, max_force=0.0))
+    client.gripper_pubs["arm1"].publish(client.GripperCommand(opening=0.0, max_force=math.inf))
+    client.spin(1.5)
+    assert process.poll() is None, output_of(process)
+    assert np.linalg.norm(position(client.latest["/arm2/endpoint_pose"]) - before) < 1e-4
+    assert client.latest["/arm1/gripper/state"].opening == pytest.approx(0.060, abs=0.001)   # still holding
+    refused = {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}["commands_refused"]
+    assert int(refused) >= 4
+
+
+def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_requests(bridge):
+    process, client = bridge
+    from geometry_msgs.msg import Pose
+
+    for fields, reason in [({"object_id": "no_such_object"}, "unknown object"),
+                           ({"object_in_gripper": Pose()}, None)]:
+        response = client.reset(**fields)
+        assert response.success is (reason is None), response.message
+        if reason:
+            assert reason in response.message
+    bad = Pose()
+    bad.position.x = math.nan
+    bad.orientation.w = 1.0
+    response = client.reset(object_in_gripper=bad)
+    assert not response.success and "non-finite" in response.message
+    tilted = Pose()
+    tilted.orientation.w = 1.0
+    tilted.orientation.x = 0.0
+    # The plug pinched across its 60 mm side (object y along the grasp axis), turned 20 deg about it.
+    x, y, z, w = (Rotation.from_euler("x", 20, degrees=True) * Rotation.from_matrix(
+        [[0, 1, 0], [0, 0, 1], [1, 0, 0]])).as_quat()
+    tilted.orientation.x, tilted.orientation.y, tilted.orientation.z, tilted.orientation.w = x, y, z, w
+    time_before = client.sim_time()
+    response = client.reset(object_id="plug", object_in_gripper=tilted, grip_force=12.0)
+    assert response.success, response.message
+    settled = response.object_in_gripper.orientation
+    turned = Rotation.from_quat([x, y, z, w]).inv() * Rotation.from_quat([settled.x, settled.y, settled.z, settled.w])
+    assert turned.magnitude() < np.deg2rad(2)
+    assert response.opening == pytest.approx(0.060, abs=0.001)
+    truth = client.wait_for(lambda: (m := client.latest["/ground_truth/object_in_arm1"]) and stamp(m) > time_before
+                            and m, what="ground truth after the reset")
+    q = truth.pose.orientation
+    assert (Rotation.from_quat([q.x, q.y, q.z, q.w]).inv() * Rotation.from_quat([x, y, z, w])).magnitude() < np.deg2rad(2)
+    assert client.sim_time() >= time_before          # simulated time never runs backwards
+    assert process.poll() is None
