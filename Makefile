@@ -18,6 +18,7 @@ test: setup
 bench: setup
 	$(DMG) graph bench --objects box plug bracket -o out/bench_graph.json
 	$(DMG) bench planner -o out/bench_planner.json
+	$(DMG) bench sim -o out/bench_sim.json
 
 clean:
 	rm -rf build out

@@ -9,7 +9,7 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import bag, demo, graph_cli, launcher, planner_bench, ros_verbs
+from dmg_bringup import bag, demo, graph_cli, launcher, planner_bench, ros_verbs, sim_bench
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -41,7 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
     launcher.register(subparsers)
     graph_cli.register(subparsers)
     demo.register(subparsers)
-    planner_bench.register(subparsers)
+    bench = subparsers.add_parser("bench", help="benchmarks of the ROS nodes (the DMG core: `dmg graph bench`)")
+    verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
+    planner_bench.register(verbs)
+    sim_bench.register(verbs)
     return parser
 
 

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import yaml
 
-from dmg_bringup.environment import config_dir, ros_environment
+from dmg_bringup.environment import apply_ros_environment, config_dir, ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
 PR_SET_PDEATHSIG = 1
@@ -159,6 +159,7 @@ class Launcher:
 
 
 def up(args: argparse.Namespace) -> int:
+    apply_ros_environment()   # executables resolve through the ament index, as under `ros2 launch`
     path = Path(args.config) if args.config else config_dir() / "launch" / f"{args.launch}.yaml"
     try:
         specs = load_launch_file(path)

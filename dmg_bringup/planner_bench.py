@@ -181,9 +181,7 @@ def command(args: argparse.Namespace) -> int:
     return 0 if report["failures"] == 0 else 1
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    bench = subparsers.add_parser("bench", help="benchmarks of the ROS nodes (the DMG core: `dmg graph bench`)")
-    verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
+def register(verbs: argparse._SubParsersAction) -> None:
     p = verbs.add_parser("planner", help="planner_node service latency beside an echo service", description=__doc__,
                          formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--calls", type=int, default=500, help="calls per service")

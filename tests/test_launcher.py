@@ -88,11 +88,14 @@ def test_optional_node_may_exit(tmp_path):
 
 
 def test_package_nodes_get_their_name_and_parameters(tmp_path):
-    """A package/executable entry is resolved like ros2 run, renamed and given a params file."""
+    """A package/executable entry is resolved like ros2 run, renamed and given a params file,
+    from a plain shell (no ROS environment variables set beforehand)."""
     launch = _launch_file(tmp_path, [{"name": "my_planner", "package": "dmg_planner", "executable": "planner_node",
                                       "parameters": {"cache_dir": str(tmp_path / "cache"), "objects": ["plug"]}}])
+    plain = {k: v for k, v in os.environ.items()
+             if k not in ("AMENT_PREFIX_PATH", "FASTRTPS_DEFAULT_PROFILES_FILE", "RMW_IMPLEMENTATION")}
     process = subprocess.Popen([DMG, "up", "--config", launch], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                               text=True, start_new_session=True)
+                               text=True, start_new_session=True, env=plain)
     lines = []
     try:
         deadline = time.monotonic() + 60

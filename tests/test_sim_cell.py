@@ -11,6 +11,7 @@ from dmg_perception.tags import detector, tag_corners
 from dmg_planner.objects import load_object, object_names
 from dmg_planner.transforms import distance, invert
 from dmg_sim_bridge.cell import Cell, CellError
+from dmg_sim_bridge.recording import FrameRecorder
 
 PUSH_SPEED = 0.01   # m/s
 
@@ -150,3 +151,22 @@ def test_bad_resets_are_refused_with_a_reason_and_keep_the_scene(cell):
         assert np.allclose(cell.object_pose(), kept)
     cell.reset(object_in_gripper=wide)            # ...and gives a valid grasp
     assert cell.opening("arm1") == pytest.approx(0.100, abs=0.002)
+
+
+@pytest.mark.parametrize("target", ["frames", "run.mp4"])
+def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, target):
+    cell.reset(object_name="box")
+    recorder = FrameRecorder(tmp_path / target, fps=30.0, every=2)
+    for _ in range(6):
+        cell.run(1 / 30)
+        recorder.add(cell.render())
+    recorder.close()
+    assert recorder.frames_written == 3
+    if target == "frames":
+        saved = [cv2.imread(str(path)) for path in sorted((tmp_path / target).glob("frame_*.png"))]
+    else:
+        video = cv2.VideoCapture(str(tmp_path / target))
+        saved = [frame for ok, frame in iter(video.read, (False, None)) if ok]
+    assert len(saved) == 3 and saved[0].shape == (480, 640, 3)
+    _, ids, _ = detector().detectMarkers(cv2.cvtColor(saved[-1], cv2.COLOR_BGR2GRAY))
+    assert ids is not None          # the saved frame still shows the tags
