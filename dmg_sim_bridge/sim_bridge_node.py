@@ -217,7 +217,7 @@ class SimBridgeNode(Node):
                     elif ahead < -RESYNC_LAG:
                         anchor = (wall, now)
         except Exception as error:   # noqa: BLE001 - reported (diagnostics turn ERROR), not swallowed
-            if not self.stopping.is_set():
+            if not self.stopping.is_set() and self.context.ok():   # not just the shutdown racing a publish
                 self.get_logger().fatal(f"simulation stopped: {type(error).__name__}: {error}")
         finally:
             if recorder is not None:

@@ -157,8 +157,11 @@ def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
     client.history[topic].clear()
     client.drive("arm2", (0.0, 0.0, 0.04), seconds=1.0)
     poses = client.history[topic]
-    velocity = (position(poses[-1]) - position(poses[0])) / (stamp(poses[-1]) - stamp(poses[0]))
-    assert velocity == pytest.approx([0.0, 0.0, 0.04], abs=0.04 * 0.05)
+    # Median over the 10 ms state intervals: a test process stalled past the watchdog (100 ms)
+    # on a loaded machine rightly stops the arm for a moment, and must not count as slow tracking.
+    steps = np.diff([position(p) for p in poses], axis=0) / np.diff([stamp(p) for p in poses])[:, None]
+    assert len(steps) > 50
+    assert np.median(steps, axis=0) == pytest.approx([0.0, 0.0, 0.04], abs=0.04 * 0.05)
     client.spin(0.4)                          # no more commands: the watchdog (0.1 s) stops the arm
     held = position(client.latest[topic])
     client.spin(0.5)
