@@ -14,20 +14,18 @@ multi-threaded executor) and every failure is answered with an error code, never
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
-from dmg_bringup.environment import apply_ros_environment
+from dmg_bringup.node_main import run_node
 from dmg_bringup.parameters import declare_from_config
 from dmg_interfaces.msg import RepositioningPlan
 from dmg_interfaces.srv import LoadObject, PlanRepositioning
@@ -38,25 +36,8 @@ from dmg_planner.search import PlanStatus, SearchOptions
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
-    argparse.ArgumentParser(prog="planner_node", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-                            epilog="example: planner_node --ros-args -p objects:=[box] -p cache_dir:=/tmp/graphs"
-                            ).parse_known_args(own)
-    apply_ros_environment()
-    rclpy.init(args=["planner_node", *argv])
-    node = PlannerNode()
-    executor = MultiThreadedExecutor(num_threads=node.threads)
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.library.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("planner_node", __doc__, "example: planner_node --ros-args -p objects:=[box] -p cache_dir:=/tmp/graphs",
+                    argv, PlannerNode, lambda node: MultiThreadedExecutor(num_threads=node.threads))
 
 
 class PlannerNode(Node):
@@ -143,6 +124,9 @@ class PlannerNode(Node):
                     f"({result.planning_time * 1000:.2f} ms planning, "
                     f"{(time.perf_counter() - began) * 1000:.2f} ms in the node): {result.message}")
         return response
+
+    def shutdown(self) -> None:
+        self.library.shutdown()
 
     def report(self, success: bool, text: str) -> None:
         """Log a request's outcome (rclpy wants one severity per call site, hence two calls)."""

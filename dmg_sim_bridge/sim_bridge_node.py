@@ -23,11 +23,9 @@ answered with the reason; the simulation keeps running either way.
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import queue
-import sys
 import tempfile
 import threading
 import time
@@ -39,13 +37,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must precede t
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
 from geometry_msgs.msg import PoseStamped, TwistStamped  # noqa: E402
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
 
-from dmg_bringup.environment import apply_ros_environment  # noqa: E402
+from dmg_bringup.node_main import run_node  # noqa: E402
 from dmg_bringup.geometry_messages import is_all_zero, pose_message, time_message, transform_from_pose  # noqa: E402
 from dmg_bringup.parameters import declare_from_config  # noqa: E402
 from dmg_interfaces.msg import GripperCommand, GripperState  # noqa: E402
@@ -70,31 +67,8 @@ class ResetRequest:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
-    argparse.ArgumentParser(prog="sim_bridge_node", description=__doc__,
-                            formatter_class=argparse.RawDescriptionHelpFormatter,
-                            epilog="example: sim_bridge_node --ros-args -p object:=plug -p camera_rate:=15"
-                            ).parse_known_args(own)
-    apply_ros_environment()
-    rclpy.init(args=["sim_bridge_node", *argv])
-    try:
-        node = SimBridgeNode()
-    except CellError as error:
-        print(f"sim_bridge_node: cannot start the cell: {error}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 1
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("sim_bridge_node", __doc__, "example: sim_bridge_node --ros-args -p object:=plug -p camera_rate:=15",
+                    argv, SimBridgeNode, startup_errors=(CellError,))
 
 
 class SimBridgeNode(Node):

@@ -229,3 +229,10 @@ def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_
     assert (Rotation.from_quat([q.x, q.y, q.z, q.w]).inv() * Rotation.from_quat([x, y, z, w])).magnitude() < np.deg2rad(2)
     assert client.sim_time() >= time_before          # simulated time never runs backwards
     assert process.poll() is None
+
+
+def test_an_unknown_start_object_exits_with_the_reason():
+    result = subprocess.run([DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args", "-p", "object:=no_such_object"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert "cannot start: unknown object 'no_such_object'" in result.stderr

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from dmg_planner.objects import load_object
