@@ -258,6 +258,8 @@ class SimBridgeNode(Node):
         info.header = image.header
         self.image_pub.publish(image)
         self.info_pub.publish(info)
+        # The camera pose at exactly the image's time (perception need not interpolate).
+        self.camera_pose_pub.publish(self._stamped(self.cell.camera_pose(), self.base_frame, stamp))
         self.statistics["frames"] += 1
 
     def publish_diagnostics(self) -> None:

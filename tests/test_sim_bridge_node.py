@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from conftest import DMG, Processes
 from dmg_perception.tags import detector
+from dmg_sim_bridge.sim_config import load_sim_config
 
 pytestmark = pytest.mark.ros
 
@@ -223,7 +224,9 @@ def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_
     turned = Rotation.from_quat([x, y, z, w]).inv() * Rotation.from_quat([settled.x, settled.y, settled.z, settled.w])
     assert turned.magnitude() < np.deg2rad(2)
     assert response.opening == pytest.approx(0.060, abs=0.001)
-    truth = client.wait_for(lambda: (m := client.latest["/ground_truth/object_in_arm1"]) and stamp(m) > time_before
+    # A reset runs settle_time of physics at once: later messages are stamped after that.
+    settled_at = time_before + load_sim_config().settle_time
+    truth = client.wait_for(lambda: (m := client.latest["/ground_truth/object_in_arm1"]) and stamp(m) > settled_at
                             and m, what="ground truth after the reset")
     q = truth.pose.orientation
     assert (Rotation.from_quat([q.x, q.y, q.z, q.w]).inv() * Rotation.from_quat([x, y, z, w])).magnitude() < np.deg2rad(2)

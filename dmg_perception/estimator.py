@@ -1,0 +1,184 @@
+"""The object's pose from the AprilTags a camera sees, fused over all visible tags.
+
+Per tag, cv2.aruco finds the corners (AprilTag corner refinement) and solvePnP's
+IPPE_SQUARE gives its two candidate poses; every candidate proposes an object pose through
+the object's tag layout. The proposal that explains the most tags (each tag's corners
+within `inlier_threshold` pixels) wins, tags it cannot explain are rejected as outliers
+(a misdetection, a tag of another object), and the pose is refined by Levenberg-Marquardt
+over all corners of the inlier tags. Quality = RMS reprojection error over those corners;
+covariance = sigma^2 (J^T J)^-1 of the reprojection, with sigma the residual's standard
+deviation (at least `pixel_noise`), expressed in the requested frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from dmg_perception.tags import detector, tag_corners, tag_pose
+from dmg_planner.objects import ObjectModel
+from dmg_planner.transforms import from_rotation, invert
+
+class EstimationError(ValueError):
+    """A configuration the estimator cannot work with; the message says why."""
+
+
+@dataclass
+class TagObservation:
+    id: int
+    corners: np.ndarray                      # (4, 2) pixels, cv2.aruco order
+    camera_from_tag: np.ndarray | None = None   # 4x4, when the tag belongs to a known object
+    reprojection_error: float = float("nan")   # px RMS of the corners under the fused object pose
+
+
+@dataclass
+class ObjectEstimate:
+    object_name: str
+    pose: np.ndarray                 # 4x4: the object in the requested frame
+    covariance: np.ndarray           # 6x6 over (x, y, z, rotation about x, y, z) in that frame
+    reprojection_error: float        # px RMS over the inlier tags' corners
+    tags_used: list[int] = field(default_factory=list)
+    tags_rejected: list[int] = field(default_factory=list)
+
+
+def _rt(camera_from_object: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return cv2.Rodrigues(camera_from_object[:3, :3])[0], camera_from_object[:3, 3].copy()
+
+
+def _matrix(rvec, tvec) -> np.ndarray:
+    return from_rotation(cv2.Rodrigues(np.asarray(rvec, float))[0], np.ravel(tvec))
+
+
+class ObjectPoseEstimator:
+    def __init__(self, objects: list[ObjectModel], inlier_threshold: float = 3.0, pixel_noise: float = 0.3):
+        self.inlier_threshold = inlier_threshold
+        self.pixel_noise = pixel_noise
+        self.detector = detector()
+        self.tags: dict[int, tuple[str, object]] = {}
+        for model in objects:
+            for tag in model.apriltags:
+                if tag.id in self.tags:
+                    raise EstimationError(f"tag {tag.id} is on both {self.tags[tag.id][0]} and {model.name}: "
+                                          "tag ids must be unique among the objects perception knows")
+                self.tags[tag.id] = (model.name, tag)
+        self.intrinsics: np.ndarray | None = None
+        self.distortion = np.zeros(5)
+
+    def set_camera(self, intrinsics: np.ndarray, distortion=None) -> None:
+        intrinsics = np.asarray(intrinsics, float).reshape(3, 3)
+        if not np.all(np.isfinite(intrinsics)) or intrinsics[0, 0] <= 0 or intrinsics[1, 1] <= 0:
+            raise EstimationError(f"camera intrinsics are not usable: {intrinsics.ravel().tolist()}")
+        self.intrinsics = intrinsics
+        self.distortion = np.zeros(5) if distortion is None or len(distortion) == 0 else np.asarray(distortion, float)
+
+    def detect(self, grey: np.ndarray) -> list[TagObservation]:
+        """Every 36h11 tag in the image; tags of known objects get their own pose (IPPE_SQUARE)."""
+        if self.intrinsics is None:
+            raise EstimationError("no camera intrinsics yet")
+        corners, ids, _ = self.detector.detectMarkers(grey)
+        observations = []
+        for found, tag_id in zip(corners, [] if ids is None else ids.ravel()):
+            observation = TagObservation(int(tag_id), found.reshape(4, 2).astype(float))
+            if observation.id in self.tags:
+                observation.camera_from_tag = self._tag_candidates(observation)[0]
+            observations.append(observation)
+        return observations
+
+    def _tag_candidates(self, observation: TagObservation) -> list[np.ndarray]:
+        """IPPE_SQUARE's solutions for one tag (camera_from_tag), best first."""
+        half = self.tags[observation.id][1].size / 2
+        square = np.array([[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]], float)
+        count, rvecs, tvecs, errors = cv2.solvePnPGeneric(square, observation.corners, self.intrinsics,
+                                                          self.distortion, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        order = np.argsort(np.ravel(errors)) if count else []
+        return [_matrix(rvecs[i], tvecs[i]) for i in order]
+
+    def identify(self, observations: list[TagObservation]) -> str | None:
+        """The known object with the most tags in view (None if none)."""
+        counts: dict[str, int] = {}
+        for observation in observations:
+            if observation.id in self.tags:
+                name = self.tags[observation.id][0]
+                counts[name] = counts.get(name, 0) + 1
+        return max(sorted(counts), key=lambda name: counts[name]) if counts else None
+
+    def estimate(self, observations: list[TagObservation], frame_from_camera: np.ndarray | None = None,
+                 object_name: str | None = None) -> ObjectEstimate | None:
+        """The object's pose (in the frame `frame_from_camera` maps the camera into; default the
+        camera) from the observations; None when none of its tags is explained."""
+        object_name = object_name or self.identify(observations)
+        mine = [o for o in observations if o.id in self.tags and self.tags[o.id][0] == object_name]
+        if not mine:
+            return None
+        layout = {o.id: tag_corners(self.tags[o.id][1]) for o in mine}
+        best, best_score = None, None
+        for observation in mine:
+            rotation, position = tag_pose(self.tags[observation.id][1])
+            object_from_tag = from_rotation(rotation, position)
+            for camera_from_tag in self._tag_candidates(observation):
+                candidate = camera_from_tag @ invert(object_from_tag)
+                errors = self._errors(candidate, mine, layout)
+                inliers = errors < self.inlier_threshold
+                score = (int(inliers.sum()), -float(errors[inliers].sum()))
+                if best_score is None or score > best_score:
+                    best, best_score = candidate, score
+        errors = self._errors(best, mine, layout)
+        inliers = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
+        if not inliers:
+            return None
+        points = np.concatenate([layout[o.id] for o in inliers])
+        pixels = np.concatenate([o.corners for o in inliers])
+        camera_from_object = self._refine(best, points, pixels)
+        errors = self._errors(camera_from_object, mine, layout)
+        for observation, error in zip(mine, errors):
+            observation.reprojection_error = float(error)
+        used = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
+        residual = self._residuals(camera_from_object, points, pixels)
+        rms = float(np.sqrt(np.mean(residual**2)))
+        frame_from_camera = np.eye(4) if frame_from_camera is None else frame_from_camera
+        pose = frame_from_camera @ camera_from_object
+        covariance = self._covariance(camera_from_object, frame_from_camera, points, residual)
+        return ObjectEstimate(object_name, pose, covariance, rms, sorted(o.id for o in used),
+                              sorted(o.id for o in mine if o not in used))
+
+    def _refine(self, start: np.ndarray, points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+        """Levenberg-Marquardt (OpenCV) on the rotation relative to `start`: the object points are
+        turned by start's rotation first, so the solver starts at a zero Rodrigues vector, far
+        from its singularity at half a turn (where a tag seen head-on often sits)."""
+        turned = points @ start[:3, :3].T
+        rvec, tvec = cv2.solvePnPRefineLM(turned, pixels, self.intrinsics, self.distortion, np.zeros((3, 1)),
+                                          start[:3, 3].reshape(3, 1).copy())
+        return from_rotation(cv2.Rodrigues(rvec)[0] @ start[:3, :3], tvec.ravel())
+
+    def _residuals(self, camera_from_object: np.ndarray, points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+        rvec, tvec = _rt(camera_from_object)
+        projected, _ = cv2.projectPoints(points, rvec, tvec, self.intrinsics, self.distortion)
+        return (projected.reshape(-1, 2) - pixels).ravel()
+
+    def _errors(self, camera_from_object: np.ndarray, observations: list[TagObservation], layout) -> np.ndarray:
+        """Per tag RMS reprojection error [px]; inf for a tag that would be behind the camera."""
+        errors = []
+        for observation in observations:
+            points = layout[observation.id] @ camera_from_object[:3, :3].T + camera_from_object[:3, 3]
+            if np.any(points[:, 2] <= 0):
+                errors.append(np.inf)
+                continue
+            residual = self._residuals(camera_from_object, layout[observation.id], observation.corners)
+            errors.append(float(np.sqrt(np.mean(residual**2))))
+        return np.asarray(errors)
+
+    def _covariance(self, camera_from_object: np.ndarray, frame_from_camera: np.ndarray, points: np.ndarray,
+                    residual: np.ndarray) -> np.ndarray:
+        """sigma^2 (J^T J)^-1 over (position, rotation about fixed axes) of the object, in the frame.
+
+        OpenCV's projection Jacobian at a zero Rodrigues vector (points pre-turned) is exactly
+        the one for a small rotation exp(dtheta) applied to the object in the camera frame."""
+        turned = points @ camera_from_object[:3, :3].T
+        _, jacobian = cv2.projectPoints(turned, np.zeros(3), camera_from_object[:3, 3], self.intrinsics, self.distortion)
+        jacobian = np.hstack([jacobian[:, 3:6], jacobian[:, 0:3]])
+        dof = max(residual.size - 6, 1)
+        sigma2 = max(float(residual @ residual) / dof, self.pixel_noise**2)
+        in_camera = sigma2 * np.linalg.pinv(jacobian.T @ jacobian)
+        rotate = np.kron(np.eye(2), frame_from_camera[:3, :3])
+        return rotate @ in_camera @ rotate.T

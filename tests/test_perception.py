@@ -1,0 +1,184 @@
+"""Perception core on real renders of the simulated cell: image conversion, pose buffers,
+the fused tag pose against MuJoCo's ground truth, occlusion, outliers, and lost tracking."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from dmg_perception.estimator import EstimationError, ObjectPoseEstimator
+from dmg_perception.images import ImageError, grey_image
+from dmg_perception.pose_buffer import PoseBuffer
+from dmg_perception.tracker import Tracker, TrackingState
+from dmg_planner.objects import load_object, object_names
+from dmg_planner.transforms import distance, from_rotation, invert
+from dmg_sim_bridge.cell import Cell, default_grasp
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory):
+    cell = Cell(workdir=tmp_path_factory.mktemp("cell"))
+    yield cell
+    cell.close()
+
+
+@pytest.fixture(scope="module")
+def estimator(cell):
+    estimator = ObjectPoseEstimator([load_object(name) for name in object_names()])
+    estimator.set_camera(cell.config.camera.intrinsic_matrix())
+    return estimator
+
+
+def grey(cell: Cell) -> np.ndarray:
+    return cv2.cvtColor(cell.render(), cv2.COLOR_RGB2GRAY)
+
+
+def gripper_from_camera(cell: Cell) -> np.ndarray:
+    return invert(cell.grasp_pose("arm1")) @ cell.camera_pose()
+
+
+# --- images and pose buffers ------------------------------------------------------------
+@pytest.mark.parametrize("encoding, conversion", [("rgb8", cv2.COLOR_RGB2GRAY), ("bgr8", cv2.COLOR_BGR2GRAY),
+                                                  ("rgba8", cv2.COLOR_RGBA2GRAY), ("bgra8", cv2.COLOR_BGRA2GRAY),
+                                                  ("mono8", None)])
+def test_image_messages_of_every_encoding_become_the_same_grey_image(encoding, conversion):
+    rng = np.random.default_rng(0)
+    channels = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}[encoding]
+    pixels = rng.integers(0, 256, size=(48, 64, channels), dtype=np.uint8)
+    expected = pixels[:, :, 0] if conversion is None else cv2.cvtColor(pixels, conversion)
+    assert np.array_equal(grey_image(encoding, 64, 48, 64 * channels, pixels.tobytes()), expected)
+    padded = np.zeros((48, 64 * channels + 8), np.uint8)          # rows padded to a larger step
+    padded[:, : 64 * channels] = pixels.reshape(48, -1)
+    assert np.array_equal(grey_image(encoding, 64, 48, 64 * channels + 8, padded.tobytes()), expected)
+
+
+def test_mono16_is_scaled_to_8_bit_in_both_byte_orders():
+    values = np.array([[0, 256, 65535]], np.uint16)
+    assert grey_image("mono16", 3, 1, 6, values.astype("<u2").tobytes()).tolist() == [[0, 1, 255]]
+    assert grey_image("mono16", 3, 1, 6, values.astype(">u2").tobytes(), big_endian=True).tolist() == [[0, 1, 255]]
+
+
+@pytest.mark.parametrize("args, reason", [(("yuv422", 4, 2, 8, bytes(16)), "unsupported encoding"),
+                                          (("rgb8", 4, 2, 12, bytes(23)), "23 bytes of data"),
+                                          (("rgb8", 4, 2, 6, bytes(12)), "step 6 is smaller"),
+                                          (("mono8", 0, 2, 0, b""), "empty image")])
+def test_bad_image_messages_are_refused_with_the_reason(args, reason):
+    with pytest.raises(ImageError, match=reason):
+        grey_image(*args)
+
+
+def test_pose_buffer_interpolates_between_stamps_and_refuses_far_ones():
+    buffer = PoseBuffer()
+    buffer.add(1.0, from_rotation(np.eye(3), [0, 0, 0]))
+    buffer.add(1.1, from_rotation(Rotation.from_euler("z", 20, degrees=True).as_matrix(), [0.01, 0, 0]))
+    middle = buffer.at(1.05, tolerance=0.06)
+    assert middle[:3, 3] == pytest.approx([0.005, 0, 0])
+    assert Rotation.from_matrix(middle[:3, :3]).as_euler("xyz", degrees=True)[2] == pytest.approx(10.0)
+    assert buffer.at(1.13, tolerance=0.05) is not None and buffer.at(1.2, tolerance=0.05) is None
+    assert buffer.at(0.5, tolerance=0.05) is None
+    buffer.add(1.08, np.eye(4))                 # out of order: ignored, the buffer stays sorted
+    assert buffer.latest_time == 1.1
+    buffer.add(0.05, np.eye(4))                 # time jumped back by more than a second: a new run
+    assert buffer.latest_time == 0.05 and buffer.at(1.05, tolerance=0.06) is None
+
+
+# --- the fused pose on real renders ------------------------------------------------------
+def test_object_pose_from_tags_matches_ground_truth_over_random_poses(cell, estimator):
+    """>= 20 random poses of every shipped object in gripper 1, seen from the default camera pose."""
+    rng = np.random.default_rng(7)
+    errors = []
+    for name in object_names():
+        grasp = default_grasp(load_object(name), cell.config.gripper.max_opening)
+        for _ in range(8):
+            turn = from_rotation(Rotation.from_euler("x", rng.uniform(-35, 35), degrees=True).as_matrix(),
+                                 [0.0, *rng.uniform(-0.01, 0.01, 2)])
+            cell.reset(object_name=name, object_in_gripper=turn @ grasp)
+            estimate = estimator.estimate(estimator.detect(grey(cell)), gripper_from_camera(cell))
+            assert estimate is not None and estimate.object_name == name
+            moved, turned = distance(estimate.pose, cell.object_in_gripper("arm1"))
+            errors.append((moved, np.rad2deg(turned)))
+            covariance = estimate.covariance
+            assert np.allclose(covariance, covariance.T) and np.all(np.linalg.eigvalsh(covariance) > 0)
+            assert np.all(np.sqrt(np.diag(covariance)[:3]) < 0.005)
+    errors = np.array(errors)
+    assert len(errors) >= 20
+    assert np.median(errors[:, 0]) <= 0.0015 and np.median(errors[:, 1]) <= 1.0, errors
+
+
+def test_fingers_hiding_a_tag_still_leave_a_pose_from_the_rest(cell, estimator):
+    cell.reset(object_name="box")
+    clear = estimator.detect(grey(cell))
+    assert {o.id for o in clear} == {0, 1}
+    # Arm 2 moves 40 mm along its grasp axis: its own fingers come between the camera and tag 0.
+    target = cell.grasp_pose("arm2")[:3, 3] + np.array([0.04, 0.0, 0.0])
+    for _ in range(200):
+        error = target - cell.grasp_pose("arm2")[:3, 3]
+        if np.linalg.norm(error) < 2e-4:
+            break
+        cell.command_twist("arm2", np.clip(5 * error, -0.05, 0.05), np.zeros(3))
+        cell.run(0.01)
+    cell.stop("arm2")
+    cell.run(0.1)
+    occluded = estimator.detect(grey(cell))
+    assert 0 < len(occluded) < len(clear)
+    estimate = estimator.estimate(occluded, gripper_from_camera(cell))
+    moved, turned = distance(estimate.pose, cell.object_in_gripper("arm1"))
+    assert moved < 0.0015 and np.rad2deg(turned) < 1.0
+
+
+def test_a_tag_that_disagrees_with_the_layout_is_rejected(cell, estimator):
+    cell.reset(object_name="box")
+    observations = estimator.detect(grey(cell))
+    impostor = type(observations[0])(id=2, corners=observations[0].corners + [25.0, 40.0])  # tag 2 faces away
+    estimate = estimator.estimate([*observations, impostor], gripper_from_camera(cell))
+    assert estimate.tags_used == [0, 1] and estimate.tags_rejected == [2]
+    moved, turned = distance(estimate.pose, cell.object_in_gripper("arm1"))
+    assert moved < 0.0015 and np.rad2deg(turned) < 1.0
+
+
+def test_duplicate_tag_ids_across_objects_are_refused():
+    box = load_object("box")
+    clone = load_object("box")
+    clone.name = "box_copy"
+    with pytest.raises(EstimationError, match="tag 0 is on both box and box_copy"):
+        ObjectPoseEstimator([box, clone])
+
+
+# --- tracking state ----------------------------------------------------------------------
+def test_tracker_reports_searching_then_lost_when_no_tag_is_seen(cell, estimator):
+    # Longer than the reset's settle time (0.5 s of simulated time pass unseen during it).
+    tracker = Tracker(estimator, lost_timeout=0.8, pose_tolerance=0.05)
+    assert tracker.status(0.0).state == TrackingState.NO_CAMERA
+    cell.reset(object_name="box")
+    for _ in range(3):
+        tracker.camera_poses.add(cell.time, cell.camera_pose())
+        tracker.gripper_poses.add(cell.time, cell.grasp_pose("arm1"))
+        assert tracker.process(cell.time, grey(cell), received=cell.time).estimate is not None
+        cell.run(1 / 30)
+    assert tracker.status(cell.time).state == TrackingState.TRACKING
+    # The box turned a quarter about the grasp axis: its tags face along the fingers, unseen.
+    quarter = from_rotation(Rotation.from_euler("x", 90, degrees=True).as_matrix(), [0, 0, 0])
+    cell.reset(object_name="box", object_in_gripper=quarter @ default_grasp(load_object("box"), 0.12))
+    states = []
+    for _ in range(30):
+        tracker.camera_poses.add(cell.time, cell.camera_pose())
+        tracker.gripper_poses.add(cell.time, cell.grasp_pose("arm1"))
+        result = tracker.process(cell.time, grey(cell), received=cell.time)
+        assert result.estimate is None and result.problem == "no tag of the object in view"
+        states.append(tracker.status(cell.time).state)
+        cell.run(1 / 30)
+    assert states[0] == TrackingState.SEARCHING and states[-1] == TrackingState.LOST
+    status = tracker.status(cell.time)
+    assert status.seconds_since_seen > 0.8 and "object lost: no tag of the object in view" in status.message
+
+
+def test_tracker_reports_lost_when_images_stop_coming(cell, estimator):
+    tracker = Tracker(estimator, lost_timeout=0.5, pose_tolerance=0.05)
+    cell.reset(object_name="box")
+    tracker.camera_poses.add(cell.time, cell.camera_pose())
+    tracker.gripper_poses.add(cell.time, cell.grasp_pose("arm1"))
+    tracker.process(cell.time, grey(cell), received=100.0)
+    assert tracker.status(100.2).state == TrackingState.TRACKING
+    assert tracker.status(101.0).state == TrackingState.LOST
+    assert "no image for 1.00 s" in tracker.status(101.0).message
