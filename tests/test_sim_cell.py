@@ -89,6 +89,8 @@ def push_from_below(cell: Cell, lateral_offset: float, gap: float, travel: float
     lower_end = obj[:3, 3] + 0.05 * obj[:3, 0]          # the default grasp puts the box's x down
     assert lower_end[2] < obj[2, 3]
     start = lower_end + np.array([0.0, lateral_offset, -(tip_radius + gap)])
+    home = cell.grasp_pose("arm2")[:3, 3]
+    move_to(cell, "arm2", np.array([start[0], home[1], start[2]]), speed=0.05)   # down beside the object first
     move_to(cell, "arm2", start, speed=0.05)
     cell.command_gripper("arm1", 0.0, grip)
     before = cell.object_in_gripper("arm1")
