@@ -20,12 +20,6 @@ def pose_message(transform: np.ndarray) -> Pose:
     return pose
 
 
-def is_all_zero(pose: Pose) -> bool:
-    """The 'not given' pose of a request: every field zero (quaternion included)."""
-    p, q = pose.position, pose.orientation
-    return not any((p.x, p.y, p.z, q.x, q.y, q.z, q.w))
-
-
 def transform_from_pose(pose: Pose, what: str = "pose") -> np.ndarray:
     """4x4 transform of a Pose; ValueError naming `what` for non-finite values or a non-unit quaternion."""
     p, q = pose.position, pose.orientation

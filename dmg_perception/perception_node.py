@@ -198,7 +198,7 @@ class PerceptionNode(Node):
             status = self.tracker.status(self.now())
         level = {TrackingState.TRACKING: DiagnosticStatus.OK, TrackingState.SEARCHING: DiagnosticStatus.OK,
                  TrackingState.LOST: DiagnosticStatus.WARN, TrackingState.NO_CAMERA: DiagnosticStatus.WARN}[status.state]
-        diagnostic = DiagnosticStatus(name="perception: object tracking", hardware_id="wrist camera", level=level,
+        diagnostic = DiagnosticStatus(name=f"{self.get_fully_qualified_name()}: object tracking", hardware_id="wrist camera", level=level,
                                       message=status.message or status.state.name.lower())
         values = {"state": status.state.name, "object": status.object_name, "rate_hz": f"{self.rate:.1f}",
                   "tags_used": str(status.tags_used), "reprojection_error_px": f"{status.reprojection_error:.3f}",

@@ -43,7 +43,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
 
 from dmg_bringup.node_main import run_node  # noqa: E402
-from dmg_bringup.geometry_messages import is_all_zero, pose_message, time_message, transform_from_pose  # noqa: E402
+from dmg_bringup.geometry_messages import pose_message, time_message, transform_from_pose  # noqa: E402
 from dmg_bringup.parameters import declare_from_config  # noqa: E402
 from dmg_interfaces.msg import GripperCommand, GripperState  # noqa: E402
 from dmg_interfaces.srv import ResetScene  # noqa: E402
@@ -125,11 +125,10 @@ class SimBridgeNode(Node):
 
     def on_reset(self, request, response):
         try:
-            pose = None if is_all_zero(request.object_in_gripper) else transform_from_pose(
-                request.object_in_gripper, "object_in_gripper")
+            pose = transform_from_pose(request.object_in_gripper, "object_in_gripper") if request.use_pose else None
         except ValueError as error:
             return self._reset_failed(response, str(error))
-        pending = ResetRequest(request.object_id, pose, request.grip_force)
+        pending = ResetRequest(request.object_id or self.cell.object.name, pose, request.grip_force)
         if not self.thread.is_alive():
             return self._reset_failed(response, "the simulation thread has stopped; restart the node")
         self.commands.put(("reset", None, pending))

@@ -200,7 +200,7 @@ def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_
     from geometry_msgs.msg import Pose
 
     for fields, reason in [({"object_id": "no_such_object"}, "unknown object"),
-                           ({"object_in_gripper": Pose()}, None)]:
+                           ({"use_pose": True, "object_in_gripper": Pose()}, None)]:   # identity: the 100 mm side
         response = client.reset(**fields)
         assert response.success is (reason is None), response.message
         if reason:
@@ -208,7 +208,7 @@ def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_
     bad = Pose()
     bad.position.x = math.nan
     bad.orientation.w = 1.0
-    response = client.reset(object_in_gripper=bad)
+    response = client.reset(use_pose=True, object_in_gripper=bad)
     assert not response.success and "non-finite" in response.message
     tilted = Pose()
     tilted.orientation.w = 1.0
@@ -218,7 +218,7 @@ def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_
         [[0, 1, 0], [0, 0, 1], [1, 0, 0]])).as_quat()
     tilted.orientation.x, tilted.orientation.y, tilted.orientation.z, tilted.orientation.w = x, y, z, w
     time_before = client.sim_time()
-    response = client.reset(object_id="plug", object_in_gripper=tilted, grip_force=12.0)
+    response = client.reset(object_id="plug", use_pose=True, object_in_gripper=tilted, grip_force=12.0)
     assert response.success, response.message
     settled = response.object_in_gripper.orientation
     turned = Rotation.from_quat([x, y, z, w]).inv() * Rotation.from_quat([settled.x, settled.y, settled.z, settled.w])

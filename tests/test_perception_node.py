@@ -1,0 +1,153 @@
+"""perception_node on the simulated cell: both as separate processes over real DDS."""
+from __future__ import annotations
+
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from conftest import DMG, Processes
+from dmg_planner.transforms import distance, homogeneous
+
+pytestmark = pytest.mark.ros
+
+
+class Watcher:
+    """An in-test rclpy node (own context) recording perception's and the sim's topics."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile
+        from sensor_msgs.msg import Image
+
+        from dmg_interfaces.msg import PerceptionStatus, TagDetections
+        from dmg_interfaces.srv import ResetScene
+
+        self.rclpy, self.Image, self.ResetScene = rclpy, Image, ResetScene
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("perception_test_watcher", context=self.context)
+        self.latest, self.truth, self.diagnostics = {}, [], {}
+        topics = {"/perception/object_pose": PoseWithCovarianceStamped, "/perception/status": PerceptionStatus,
+                  "/perception/detections": TagDetections, "/perception/debug_image": Image,
+                  "/bad/perception/status": PerceptionStatus}
+        for topic, kind in topics.items():
+            self.node.create_subscription(kind, topic, lambda msg, topic=topic: self.latest.__setitem__(topic, msg),
+                                          QoSProfile(depth=10))
+        self.node.create_subscription(PoseStamped, "/ground_truth/object_in_arm1", self.truth.append, 100)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
+        self.bad_images = self.node.create_publisher(Image, "/bad/arm2/camera/image_raw", 10)
+        self.reset_client = self.node.create_client(ResetScene, "/sim/reset")
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _diagnostics(self, msg) -> None:
+        for status in msg.status:
+            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def wait_for(self, predicate, timeout: float = 30.0, what: str = "condition"):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.02)
+            value = predicate()
+            if value:
+                return value
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def reset(self, **fields):
+        assert self.reset_client.wait_for_service(timeout_sec=30)
+        future = self.reset_client.call_async(self.ResetScene.Request(**fields))
+        return self.wait_for(lambda: future.result() if future.done() else None, timeout=60, what="reset")
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.context)
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def transform(pose) -> np.ndarray:
+    p, q = pose.position, pose.orientation
+    return homogeneous([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
+
+
+@pytest.fixture(scope="module")
+def cell():
+    processes = Processes()
+    sim = processes.start([DMG, "run", "dmg_sim_bridge", "sim_bridge_node"], stderr=subprocess.STDOUT)
+    perception = processes.start([DMG, "run", "dmg_perception", "perception_node", "--ros-args",
+                                  "-p", "use_sim_time:=true", "-p", "debug_image:=true"], stderr=subprocess.STDOUT)
+    bad = processes.start([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-r", "__ns:=/bad"],
+                          stderr=subprocess.STDOUT)
+    watcher = Watcher()
+    try:
+        watcher.wait_for(lambda: watcher.latest.get("/perception/object_pose"), timeout=60, what="a first object pose")
+        yield watcher, {"sim": sim, "perception": perception, "bad": bad}
+    finally:
+        watcher.close()
+        processes.stop_all()
+
+
+def test_object_pose_in_the_gripper_matches_ground_truth(cell):
+    watcher, _ = cell
+    pose = watcher.wait_for(lambda: watcher.truth and (m := watcher.latest["/perception/object_pose"]) and
+                            stamp(watcher.truth[0]) <= stamp(m) <= stamp(watcher.truth[-1]) and m,
+                            what="a pose with ground truth around its stamp")
+    truth = min(watcher.truth, key=lambda m: abs(stamp(m) - stamp(pose)))
+    assert abs(stamp(truth) - stamp(pose)) <= 0.006
+    assert pose.header.frame_id == "arm1_gripper"
+    moved, turned = distance(transform(pose.pose.pose), transform(truth.pose))
+    assert moved < 0.0015 and np.rad2deg(turned) < 1.0
+    covariance = np.array(pose.pose.covariance).reshape(6, 6)
+    assert np.all(np.linalg.eigvalsh((covariance + covariance.T) / 2) > 0)
+    status = watcher.wait_for(lambda: (s := watcher.latest["/perception/status"]).state == s.TRACKING and s,
+                              what="TRACKING status")
+    assert status.object_id == "box" and status.tags_used == 2 and status.reprojection_error < 0.5
+    detections = watcher.latest["/perception/detections"].detections
+    assert {(d.id, d.used, d.known) for d in detections} == {(0, True, True), (1, True, True)}
+    debug = watcher.wait_for(lambda: watcher.latest.get("/perception/debug_image"), what="debug image")
+    assert (debug.width, debug.height, debug.encoding) == (640, 480, "rgb8")
+
+
+def test_no_tag_in_view_turns_to_lost_within_the_timeout_and_back(cell):
+    watcher, _ = cell
+    from geometry_msgs.msg import Pose
+
+    quarter = Pose()   # the box's default grasp turned a quarter about the grasp axis: tags along the fingers
+    x, y, z, w = (Rotation.from_euler("x", 90, degrees=True) * Rotation.from_matrix(
+        [[0, 1, 0], [0, 0, 1], [1, 0, 0]])).as_quat()
+    quarter.orientation.x, quarter.orientation.y, quarter.orientation.z, quarter.orientation.w = x, y, z, w
+    assert watcher.reset(object_id="box", use_pose=True, object_in_gripper=quarter).success
+    began = time.monotonic()
+    status = watcher.wait_for(lambda: (s := watcher.latest["/perception/status"]).state == s.LOST and s,
+                              timeout=10, what="LOST")
+    assert time.monotonic() - began < 3.0          # lost_timeout 0.5 s of sim time (+ the reset's settle)
+    assert "object lost" in status.message and status.seconds_since_seen > 0.5
+    assert watcher.reset(object_id="box").success
+    watcher.wait_for(lambda: (s := watcher.latest["/perception/status"]).state == s.TRACKING, timeout=10,
+                     what=f"TRACKING again ({watcher.latest['/perception/status']})")
+
+
+def test_corrupted_or_unsupported_images_are_logged_and_the_node_carries_on(cell):
+    watcher, processes = cell
+    for encoding, data in (("yuv422", bytes(640 * 480 * 2)), ("rgb8", bytes(1000))):
+        image = watcher.Image(width=640, height=480, encoding=encoding, step=640 * (2 if encoding == "yuv422" else 3),
+                              data=data)
+        watcher.bad_images.publish(image)
+        deadline = time.monotonic() + 0.3
+        while time.monotonic() < deadline:
+            watcher.executor.spin_once(timeout_sec=0.02)
+    name = "/bad/perception: object tracking"
+    watcher.wait_for(lambda: int(watcher.diagnostics.get(name, {}).get("bad_images", 0)) >= 2, timeout=10,
+                     what="two bad images counted")
+    status = watcher.wait_for(lambda: watcher.latest.get("/bad/perception/status"), what="status of /bad")
+    assert status.state == status.NO_CAMERA
+    assert processes["bad"].poll() is None and processes["perception"].poll() is None
