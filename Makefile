@@ -19,6 +19,7 @@ bench: setup
 	$(DMG) graph bench --objects box plug bracket -o out/bench_graph.json
 	$(DMG) bench planner -o out/bench_planner.json
 	$(DMG) bench sim -o out/bench_sim.json
+	$(DMG) bench perception -o out/bench_perception.json
 
 clean:
 	rm -rf build out

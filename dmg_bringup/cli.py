@@ -9,7 +9,7 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import bag, demo, graph_cli, launcher, planner_bench, ros_verbs, sim_bench
+from dmg_bringup import bag, demo, graph_cli, launcher, perception_bench, planner_bench, ros_verbs, sim_bench
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
     planner_bench.register(verbs)
     sim_bench.register(verbs)
+    perception_bench.register(verbs)
     return parser
 
 

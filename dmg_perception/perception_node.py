@@ -114,14 +114,22 @@ class PerceptionNode(Node):
             if msg is None:
                 continue
             try:
-                grey = grey_image(msg.encoding, msg.width, msg.height, msg.step, msg.data, bool(msg.is_bigendian))
-            except ImageError as error:
-                self.counts["bad_images"] += 1
-                self.get_logger().error(f"image skipped: {error}", throttle_duration_sec=2.0)
-                continue
-            with self.lock:
-                result = self.tracker.process(seconds(msg.header.stamp), grey, self.now())
-            self.publish_result(msg, result, grey)
+                self.process(msg)
+            except Exception as error:   # noqa: BLE001 - one bad frame must not end tracking
+                if self.stopping.is_set() or not self.context.ok():
+                    return                # shutting down: publishers are gone
+                self.get_logger().error(f"frame failed: {type(error).__name__}: {error}", throttle_duration_sec=2.0)
+
+    def process(self, msg: Image) -> None:
+        try:
+            grey = grey_image(msg.encoding, msg.width, msg.height, msg.step, msg.data, bool(msg.is_bigendian))
+        except ImageError as error:
+            self.counts["bad_images"] += 1
+            self.get_logger().error(f"image skipped: {error}", throttle_duration_sec=2.0)
+            return
+        with self.lock:
+            result = self.tracker.process(seconds(msg.header.stamp), grey, self.now())
+        self.publish_result(msg, result, grey)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
