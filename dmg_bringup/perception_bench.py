@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from dmg_bringup.bench_common import add_bench, stop_process
 from dmg_bringup.environment import apply_ros_environment, ros_environment
 
 GOAL_FPS = 60.0
@@ -139,11 +140,7 @@ def node_fps(frames: list[dict], seconds: float, offer_rate: float) -> dict:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        child.send_signal(2)
-        try:
-            child.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            child.kill()
+        stop_process(child)
 
 
 def run(seconds: float, offer_rate: float) -> dict:
@@ -164,19 +161,8 @@ def format_report(report: dict) -> str:
         f"goal >= {report['goal_fps']:g} fps: {'met' if report['goal_met'] else 'MISSED'}"])
 
 
-def command(args: argparse.Namespace) -> int:
-    from dmg_bringup.graph_cli import emit_report
-
-    report = run(args.seconds, args.offer_rate)
-    emit_report(report, args.output, args.json, format_report(report))
-    return 0
-
-
 def register(verbs: argparse._SubParsersAction) -> None:
-    p = verbs.add_parser("perception", help="perception pipeline fps on one CPU and latency",
-                         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = add_bench(verbs, "perception", "perception pipeline fps on one CPU and latency", __doc__,
+                  lambda args: run(args.seconds, args.offer_rate), format_report)
     p.add_argument("--seconds", type=float, default=10.0, help="length of each measurement")
     p.add_argument("--offer-rate", type=float, default=90.0, help="frames per second offered to the node")
-    p.add_argument("-o", "--output", help="write the JSON report here")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=command)

@@ -10,8 +10,6 @@ until all shipped objects answer, with an empty graph cache (cold) and from the 
 from __future__ import annotations
 
 import argparse
-import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -19,6 +17,7 @@ import time
 
 import numpy as np
 
+from dmg_bringup.bench_common import add_bench, stop_process
 from dmg_bringup.environment import apply_ros_environment, ros_environment
 
 ECHO_SERVICE = "/echo_plan_repositioning"
@@ -94,7 +93,7 @@ def run(calls: int, seed_resolution: float) -> dict:
                 _wait_until_ready(executor, clients["planner"], PlanRepositioning.Request(object_id=name))
             startup[kind] = time.perf_counter() - began
             if kind == "cold":
-                _stop(children.pop())
+                stop_process(children.pop())
                 while clients["planner"].service_is_ready():
                     executor.spin_once(timeout_sec=0.1)
         children.append(subprocess.Popen([sys.executable, "-c", "from dmg_bringup.planner_bench import echo_server; "
@@ -136,16 +135,7 @@ def run(calls: int, seed_resolution: float) -> dict:
         node.destroy_node()
         rclpy.try_shutdown()
         for child in children:
-            _stop(child)
-
-
-def _stop(child: subprocess.Popen) -> None:
-    os.killpg(child.pid, signal.SIGINT)
-    try:
-        child.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        os.killpg(child.pid, signal.SIGKILL)
-        child.wait()
+            stop_process(child)
 
 
 def _wait_until_ready(executor, client, request, timeout: float = 60.0) -> None:
@@ -173,21 +163,11 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def command(args: argparse.Namespace) -> int:
-    from dmg_bringup.graph_cli import emit_report
-
-    report = run(args.calls, args.seed_resolution)
-    emit_report(report, args.output, args.json, format_report(report))
-    return 0 if report["failures"] == 0 else 1
-
-
 def register(verbs: argparse._SubParsersAction) -> None:
-    p = verbs.add_parser("planner", help="planner_node service latency beside an echo service", description=__doc__,
-                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = add_bench(verbs, "planner", "planner_node service latency beside an echo service", __doc__,
+                  lambda args: run(args.calls, args.seed_resolution), format_report,
+                  lambda report: 0 if report["failures"] == 0 else 1)
     p.add_argument("--calls", type=int, default=500, help="calls per service")
     p.add_argument("--seed-resolution", type=float, default=0.016,
                    help="graph seed resolution of the planner (default 0.016: the box has ~120 supervoxels, "
                         "the size the latency goal names)")
-    p.add_argument("-o", "--output", help="write the JSON report here")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=command)

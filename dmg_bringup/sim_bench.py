@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from dmg_bringup.bench_common import add_bench, stop_process
 from dmg_bringup.environment import apply_ros_environment, ros_environment
 
 GOALS = {"without_camera": 1.0, "with_camera": 0.5}
@@ -95,11 +96,7 @@ def node_run(seconds: float, camera_rate: float) -> dict:
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        child.send_signal(2)
-        try:
-            child.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            child.kill()
+        stop_process(child)
 
 
 def run(seconds: float, camera_rate: float) -> dict:
@@ -127,19 +124,8 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def command(args: argparse.Namespace) -> int:
-    from dmg_bringup.graph_cli import emit_report
-
-    report = run(args.seconds, args.camera_rate)
-    emit_report(report, args.output, args.json, format_report(report))
-    return 0
-
-
 def register(verbs: argparse._SubParsersAction) -> None:
-    p = verbs.add_parser("sim", help="real-time factor of the simulated cell with and without the camera",
-                         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = add_bench(verbs, "sim", "real-time factor of the simulated cell with and without the camera", __doc__,
+                  lambda args: run(args.seconds, args.camera_rate), format_report)
     p.add_argument("--seconds", type=float, default=10.0, help="length of each run (core: sim s, node: wall s)")
     p.add_argument("--camera-rate", type=float, default=30.0, help="camera frames per simulated second")
-    p.add_argument("-o", "--output", help="write the JSON report here")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=command)

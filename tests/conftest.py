@@ -67,3 +67,43 @@ def processes() -> Iterator[Processes]:
     procs = Processes()
     yield procs
     procs.stop_all()
+
+
+class RosTestNode:
+    """An rclpy node of the test itself, in its own context, spun only when the test waits."""
+
+    def __init__(self, name: str) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_for(self, predicate, timeout: float = 30.0, what: str = "condition"):
+        """Spin until predicate() is truthy; return its value."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.02)
+            value = predicate()
+            if value:
+                return value
+        raise AssertionError(f"timed out waiting for {what}")
+
+    def call(self, client, request, timeout: float = 60.0):
+        assert client.wait_for_service(timeout_sec=30), f"service {client.srv_name} did not appear"
+        future = client.call_async(request)
+        return self.wait_for(lambda: future.result() if future.done() else None, timeout, f"{client.srv_name} answer")
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.context)

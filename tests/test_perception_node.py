@@ -8,31 +8,26 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes
+from conftest import DMG, Processes, RosTestNode
 from dmg_planner.transforms import distance, homogeneous
 
 pytestmark = pytest.mark.ros
 
 
-class Watcher:
-    """An in-test rclpy node (own context) recording perception's and the sim's topics."""
+class Watcher(RosTestNode):
+    """Records perception's and the sim's topics."""
 
     def __init__(self) -> None:
-        import rclpy
+        super().__init__("perception_test_watcher")
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from sensor_msgs.msg import Image
 
         from dmg_interfaces.msg import PerceptionStatus, TagDetections
         from dmg_interfaces.srv import ResetScene
 
-        self.rclpy, self.Image, self.ResetScene = rclpy, Image, ResetScene
-        self.context = Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("perception_test_watcher", context=self.context)
+        self.Image, self.ResetScene = Image, ResetScene
         self.latest, self.truth, self.diagnostics = {}, [], {}
         topics = {"/perception/object_pose": PoseWithCovarianceStamped, "/perception/status": PerceptionStatus,
                   "/perception/detections": TagDetections, "/perception/debug_image": Image,
@@ -44,30 +39,13 @@ class Watcher:
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
         self.bad_images = self.node.create_publisher(Image, "/bad/arm2/camera/image_raw", 10)
         self.reset_client = self.node.create_client(ResetScene, "/sim/reset")
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
 
     def _diagnostics(self, msg) -> None:
         for status in msg.status:
             self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
-    def wait_for(self, predicate, timeout: float = 30.0, what: str = "condition"):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.02)
-            value = predicate()
-            if value:
-                return value
-        raise AssertionError(f"timed out waiting for {what}")
-
     def reset(self, **fields):
-        assert self.reset_client.wait_for_service(timeout_sec=30)
-        future = self.reset_client.call_async(self.ResetScene.Request(**fields))
-        return self.wait_for(lambda: future.result() if future.done() else None, timeout=60, what="reset")
-
-    def close(self) -> None:
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
+        return self.call(self.reset_client, self.ResetScene.Request(**fields))
 
 
 def stamp(msg) -> float:
@@ -142,9 +120,7 @@ def test_corrupted_or_unsupported_images_are_logged_and_the_node_carries_on(cell
         image = watcher.Image(width=640, height=480, encoding=encoding, step=640 * (2 if encoding == "yuv422" else 3),
                               data=data)
         watcher.bad_images.publish(image)
-        deadline = time.monotonic() + 0.3
-        while time.monotonic() < deadline:
-            watcher.executor.spin_once(timeout_sec=0.02)
+        watcher.spin(0.3)
     name = "/bad/perception: object tracking"
     watcher.wait_for(lambda: int(watcher.diagnostics.get(name, {}).get("bad_images", 0)) >= 2, timeout=10,
                      what="two bad images counted")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes
+from conftest import DMG, Processes, RosTestNode
 from dmg_perception.tags import detector
 from dmg_sim_bridge.sim_config import load_sim_config
 
@@ -19,15 +19,13 @@ pytestmark = pytest.mark.ros
 ROLES = ("arm1", "arm2")
 
 
-class CellClient:
-    """An in-test rclpy node (own context) that records the bridge's topics and commands it."""
+class CellClient(RosTestNode):
+    """Records the bridge's topics and commands it."""
 
     def __init__(self) -> None:
-        import rclpy
+        super().__init__("sim_test_client")
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped, TwistStamped
-        from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -35,10 +33,7 @@ class CellClient:
         from dmg_interfaces.msg import GripperCommand, GripperState
         from dmg_interfaces.srv import ResetScene
 
-        self.rclpy, self.TwistStamped, self.GripperCommand, self.ResetScene = rclpy, TwistStamped, GripperCommand, ResetScene
-        self.context = Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("sim_test_client", context=self.context)
+        self.TwistStamped, self.GripperCommand, self.ResetScene = TwistStamped, GripperCommand, ResetScene
         self.latest: dict[str, object] = {}
         self.history: dict[str, list] = {}
         topics = {"/clock": Clock, "/joint_states": JointState, "/arm2/camera/image_raw": Image,
@@ -52,27 +47,11 @@ class CellClient:
         self.twist_pubs = {r: self.node.create_publisher(TwistStamped, f"/{r}/cmd_vel", 10) for r in ROLES}
         self.gripper_pubs = {r: self.node.create_publisher(GripperCommand, f"/{r}/gripper/command", 10) for r in ROLES}
         self.reset_client = self.node.create_client(ResetScene, "/sim/reset")
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
 
     def _record(self, topic: str, msg) -> None:
         self.latest[topic] = msg
         if topic.endswith("endpoint_pose") or topic.startswith("/ground_truth") or topic == "/diagnostics":
             self.history.setdefault(topic, []).append(msg)
-
-    def spin(self, seconds: float) -> None:
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def wait_for(self, predicate, timeout: float = 30.0, what: str = "condition"):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.02)
-            value = predicate()
-            if value:
-                return value
-        raise AssertionError(f"timed out waiting for {what}")
 
     def sim_time(self) -> float:
         clock = self.wait_for(lambda: self.latest.get("/clock"), what="/clock").clock
@@ -93,13 +72,7 @@ class CellClient:
             self.spin(1.0 / rate)
 
     def reset(self, **fields):
-        assert self.reset_client.wait_for_service(timeout_sec=30)
-        future = self.reset_client.call_async(self.ResetScene.Request(**fields))
-        return self.wait_for(lambda: future.result() if future.done() else None, timeout=60, what="reset")
-
-    def close(self) -> None:
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.context)
+        return self.call(self.reset_client, self.ResetScene.Request(**fields))
 
 
 def position(pose_stamped) -> np.ndarray:
