@@ -78,7 +78,7 @@ def test_load_object_round_trip(servers):
 
 
 def test_reset_scene_round_trip(servers):
-    request = {"object_id": "plug", "grip_force": 12.5,
+    request = {"object_id": "plug", "grip_force": 12.5, "use_pose": True,
                "object_in_gripper": {"position": {"x": 0.0, "y": 0.01, "z": 0.03},
                                      "orientation": {"x": 1.0, "y": 0.0, "z": 0.0, "w": 0.0}}}
     result = dmg("service", "call", "/reset", "dmg_interfaces/srv/ResetScene", json.dumps(request))
