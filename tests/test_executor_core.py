@@ -32,3 +32,46 @@ def test_ects_alpha_decides_which_gripper_moves_when_absolute_motion_is_zero():
 def test_ects_refuses_alpha_outside_0_1(alpha):
     with pytest.raises(ValueError, match="alpha must be in"):
         arm_twists(np.zeros(6), np.zeros(6), alpha)
+
+
+# --- push points (box 100 x 60 x 40 mm centred at the origin) ------------------------------
+@pytest.fixture(scope="module")
+def box_surface():
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import box_union_mesh, load_object
+
+    return ObjectSurface(*box_union_mesh(load_object("box").parts))
+
+
+def test_translation_push_is_on_the_face_ahead_of_the_contact_and_pushes_back(box_surface):
+    from dmg_executor.push_points import translation_push
+
+    # Contact on the top face (z = 20 mm) moving +x by 30 mm: the object must go -x, pushed on its +x end.
+    push = translation_push(box_surface, [0.01, 0.005, 0.02 - 1e-4], [0.03, 0.0, 0.0])
+    assert push.point == pytest.approx([0.05, 0.005, 0.02 - 1e-4], abs=1e-6)
+    assert push.normal == pytest.approx([1, 0, 0], abs=1e-6) and push.direction == pytest.approx([-1, 0, 0])
+
+
+def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surface):
+    from dmg_executor.push_points import rotation_push
+
+    # Finger on the top face (outward normal +z) pointing to the palm along -x.
+    contact, normal, palm = np.array([0.0, 0.0, 0.02]), np.array([0, 0, 1.0]), np.array([-1.0, 0, 0])
+    for angle in (0.4, -0.4):
+        push = rotation_push(box_surface, contact, normal, palm, angle, depth=0.03, inset=0.005)
+        assert push.point[0] == pytest.approx(0.03) and push.point[2] == pytest.approx(0.015)
+        assert abs(push.point[1]) == pytest.approx(0.03)          # on a +-y side face
+        lever = push.point - contact
+        torque = np.cross(lever, push.direction) @ normal        # about the outward normal
+        assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
+
+
+def test_push_points_that_do_not_exist_are_refused(box_surface):
+    from dmg_executor.push_points import PushError, rotation_push, translation_push
+
+    with pytest.raises(PushError, match="misses the object"):
+        translation_push(box_surface, [0.0, 0.2, 0.0], [1.0, 0.0, 0.0])
+    with pytest.raises(PushError, match="no direction"):
+        translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0])
+    with pytest.raises(PushError, match="not a rotation"):
+        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [-1, 0, 0], 0.0, depth=0.03, inset=0.005)
