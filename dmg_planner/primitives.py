@@ -31,6 +31,7 @@ class Primitive:
     angle_after: float
     secondary_before: np.ndarray
     secondary_after: np.ndarray
+    gripper_after: np.ndarray | None = None   # 4x4 gripper pose in the object frame after it (set by the search)
 
     @property
     def opening_before(self) -> float:

@@ -7,6 +7,7 @@ from geometry_msgs.msg import Point, Pose, Vector3
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from dmg_bringup.geometry_messages import pose_message
 from dmg_interfaces.msg import ManipulationPrimitive
 from dmg_planner.graph import GraphParameters
 from dmg_planner.library import LoadedObject, ObjectState
@@ -67,7 +68,7 @@ def fill_plan(message, result: PlanResult, request, frame_id: str, stamp) -> Non
             contact_before=_point(p.contact_before), contact_after=_point(p.contact_after),
             finger_angle_before=float(p.angle_before), finger_angle_after=float(p.angle_after),
             secondary_before=_point(p.secondary_before), secondary_after=_point(p.secondary_after),
-            opening_before=p.opening_before, opening_after=p.opening_after))
+            opening_before=p.opening_before, opening_after=p.opening_after, gripper_after=pose_message(p.gripper_after)))
     message.primitives = primitives
     message.principal_path = [_point(v) for v in result.principal_path]
     message.secondary_path = [_point(v) for v in result.secondary_path]

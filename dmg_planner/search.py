@@ -527,6 +527,11 @@ def _result_from_path(graph: DexterousManipulationGraph, states: StateGraph, pat
     angles[unturned] = s.angle
     tolerance = options.merge_tolerance or graph.parameters.seed_resolution / 2
     primitives = primitives_from_path(contacts, secondaries, angles, g.angle, tolerance)
+    for primitive in primitives:
+        vertex = _vertex_near(graph, primitive.contact_after)
+        toward_palm = graph.direction(np.array([vertex]), np.array([primitive.angle_after]))[0]
+        primitive.gripper_after = gripper_frame((primitive.contact_after + primitive.secondary_after) / 2, s.axis,
+                                                toward_palm, s.principal_finger)
     keep = np.ones(len(contacts), bool)
     keep[1:] = np.any(np.diff(contacts, axis=0) != 0, axis=1) | (np.diff(angles) != 0)
     return PlanResult(PlanStatus.OK, f"{len(primitives)} primitives, cost {cost:.4f}", primitives=primitives,
@@ -545,7 +550,7 @@ def grasp_pose(graph: DexterousManipulationGraph, point: np.ndarray, angle: floa
     alive = np.flatnonzero(graph.vertex_component >= 0)
     if len(alive) == 0:
         raise GraspError("the graph has no vertices")
-    vertex = alive[np.argmin(np.linalg.norm(graph.positions[alive] - point, axis=1))]
+    vertex = _vertex_near(graph, point)
     if np.linalg.norm(graph.positions[vertex] - point) > 2 * graph.parameters.seed_resolution:
         raise GraspError(f"{np.round(point, 4).tolist()} is not on the object's graph (nearest vertex "
                          f"{np.linalg.norm(graph.positions[vertex] - point) * 1000:.1f} mm away)")
@@ -554,8 +559,26 @@ def grasp_pose(graph: DexterousManipulationGraph, point: np.ndarray, angle: floa
     secondary, hit = secondary_contacts(graph, point[None], axis)
     contact, _ = _cast(graph, (secondary[0] - _reach(graph) * axis)[None], axis[None])
     finger_direction = graph.direction(np.array([vertex]), np.array([angle]))[0]
-    x = axis if principal_finger == 0 else -axis
-    z = -finger_direction
-    rotation = np.column_stack([x, np.cross(z, x), z])
-    middle = (contact[0] + secondary[0]) / 2
-    return GripperPose(middle, Rotation.from_matrix(rotation).as_quat(), float(np.linalg.norm(secondary[0] - contact[0])))
+    frame = gripper_frame((contact[0] + secondary[0]) / 2, axis, finger_direction, principal_finger)
+    return GripperPose(frame[:3, 3], Rotation.from_matrix(frame[:3, :3]).as_quat(),
+                       float(np.linalg.norm(secondary[0] - contact[0])))
+
+
+def gripper_frame(middle: np.ndarray, axis: np.ndarray, toward_palm: np.ndarray, principal_finger: int) -> np.ndarray:
+    """4x4 gripper pose in the object frame: x along the grasp axis from finger 0 to finger 1
+    (`axis` runs principal -> secondary), z along the fingers away from the palm, origin `middle`."""
+    x = axis / np.linalg.norm(axis) if principal_finger == 0 else -axis / np.linalg.norm(axis)
+    z = -(toward_palm - (toward_palm @ x) * x)
+    z /= np.linalg.norm(z)
+    frame = np.eye(4)
+    frame[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    frame[:3, 3] = middle
+    return frame
+
+
+def _vertex_near(graph: DexterousManipulationGraph, point: np.ndarray) -> int:
+    """The alive vertex nearest to a surface point."""
+    alive = np.flatnonzero(graph.vertex_component >= 0)
+    if "alive_tree" not in graph._cache:
+        graph._cache["alive_tree"] = cKDTree(graph.positions[alive])
+    return int(alive[graph._cache["alive_tree"].query(point)[1]])

@@ -263,3 +263,32 @@ def test_primitives_merge_zigzags_and_keep_the_rotation_direction():
     still = np.zeros((len(steps), 3))
     turn = primitives_from_path(still, still - [0, 0, 0.04], steps, np.deg2rad(200), tolerance=0.005)
     assert len(turn) == 1 and np.rad2deg(turn[0].angle) == pytest.approx(200.0)
+
+
+def test_every_primitive_carries_the_gripper_pose_after_it_and_the_last_is_the_goal():
+    """The executor servoes to these poses: they must follow the primitives and end at the goal grasp."""
+    from dmg_planner.search import resolve_grasp
+
+    graph = build_graph(load_object("box").load_shape(0.001), GraphParameters(seed_resolution=0.013))
+    start = grasp_pose(graph, [-0.03, 0.0, 0.02], np.deg2rad(180))
+    goal = grasp_pose(graph, [0.03, 0.01, 0.02], np.deg2rad(90))
+    result = plan(graph, start, goal)
+    assert result.success and len(result.primitives) >= 2
+    previous = np.eye(4)
+    previous[:3, :3] = Rotation.from_quat(start.quaternion).as_matrix()
+    previous[:3, 3] = start.position
+    for primitive in result.primitives:
+        after = primitive.gripper_after
+        assert np.allclose(after[:3, :3].T @ after[:3, :3], np.eye(3), atol=1e-9)
+        assert np.allclose(after[:3, 0], previous[:3, 0], atol=1e-9)          # the grasp axis never changes
+        if primitive.kind == PrimitiveKind.TRANSLATION:                        # orientation kept, moved by t
+            assert np.allclose(after[:3, :3], previous[:3, :3], atol=1e-6)
+            assert np.allclose(after[:3, 3] - previous[:3, 3], primitive.translation, atol=1e-6)
+        else:                                                                  # turned by the angle about x
+            turn = Rotation.from_matrix(previous[:3, :3].T @ after[:3, :3]).as_rotvec()
+            assert np.linalg.norm(turn) == pytest.approx(abs(primitive.angle), abs=1e-6)
+            assert np.allclose(after[:3, 3], previous[:3, 3], atol=1e-6)
+        previous = after
+    resolved = resolve_grasp(graph, goal, result.principal_finger, "goal")
+    assert np.allclose(previous[:3, 3], (resolved.contact + resolved.secondary) / 2, atol=1e-6)   # float32 ray casts
+    assert np.allclose(previous[:3, 2], -resolved.finger_direction, atol=1e-6)

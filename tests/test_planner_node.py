@@ -155,6 +155,10 @@ def assert_same_plan(response, expected) -> None:
         assert got.kind == int(want.kind)
         assert got.angle == pytest.approx(want.angle, abs=1e-9)
         assert np.allclose([got.translation.x, got.translation.y, got.translation.z], want.translation, atol=1e-9)
+        after = got.gripper_after
+        assert np.allclose([after.position.x, after.position.y, after.position.z], want.gripper_after[:3, 3], atol=1e-9)
+        turn = Rotation.from_quat([after.orientation.x, after.orientation.y, after.orientation.z, after.orientation.w])
+        assert (turn.inv() * Rotation.from_matrix(want.gripper_after[:3, :3])).magnitude() < 1e-6
     assert plan.cost == pytest.approx(expected.cost, rel=1e-9)
     assert len(plan.principal_path) == len(expected.principal_path) == len(plan.secondary_path)
     assert plan.planning_time > 0 and plan.header.frame_id == f"object/{plan.object_id}"
