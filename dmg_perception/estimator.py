@@ -28,8 +28,13 @@ class EstimationError(ValueError):
 class TagObservation:
     id: int
     corners: np.ndarray                      # (4, 2) pixels, cv2.aruco order
-    camera_from_tag: np.ndarray | None = None   # 4x4, when the tag belongs to a known object
+    candidates: list[np.ndarray] = field(default_factory=list)   # IPPE_SQUARE camera_from_tag solutions, best first
     reprojection_error: float = float("nan")   # px RMS of the corners under the fused object pose
+
+    @property
+    def camera_from_tag(self) -> np.ndarray | None:
+        """The tag's own pose (4x4) when it belongs to a known object."""
+        return self.candidates[0] if self.candidates else None
 
 
 @dataclass
@@ -81,7 +86,7 @@ class ObjectPoseEstimator:
         for found, tag_id in zip(corners, [] if ids is None else ids.ravel()):
             observation = TagObservation(int(tag_id), found.reshape(4, 2).astype(float))
             if observation.id in self.tags:
-                observation.camera_from_tag = self._tag_candidates(observation)[0]
+                observation.candidates = self._tag_candidates(observation)
             observations.append(observation)
         return observations
 
@@ -116,7 +121,7 @@ class ObjectPoseEstimator:
         for observation in mine:
             rotation, position = tag_pose(self.tags[observation.id][1])
             object_from_tag = from_rotation(rotation, position)
-            for camera_from_tag in self._tag_candidates(observation):
+            for camera_from_tag in observation.candidates or self._tag_candidates(observation):
                 candidate = camera_from_tag @ invert(object_from_tag)
                 errors = self._errors(candidate, mine, layout)
                 inliers = errors < self.inlier_threshold

@@ -148,6 +148,10 @@ class Cell:
                               if model.geom_bodyid[g] == model.body(OBJECT_BODY).id and model.geom_contype[g]]
         self._object_qpos = model.joint(f"{OBJECT_BODY}_free").qposadr[0]
         self._jacobian = np.zeros((6, model.nv))
+        names = [name for arm in self.arms.values() for name in
+                 [f"{arm.side}_{j['name']}" for j in self.robot["joints"]] + [f"{arm.role}_finger{k}" for k in (0, 1)]]
+        self._joint_layout = (names, np.array([model.joint(n).qposadr[0] for n in names]),
+                              np.array([model.joint(n).dofadr[0] for n in names]))
 
     # --- state queries --------------------------------------------------------------------
     @property
@@ -185,14 +189,8 @@ class Cell:
                              float(np.mean(np.abs(self.data.actuator_force[arm.finger_actuators]))))
 
     def joint_state(self) -> JointState:
-        names, addresses, dofs = [], [], []
-        for arm in self.arms.values():
-            names += [f"{arm.side}_{j['name']}" for j in self.robot["joints"]]
-            names += [f"{arm.role}_finger0", f"{arm.role}_finger1"]
-            addresses += [*arm.qpos, *arm.finger_qpos]
-        for name in names:
-            dofs.append(self.model.joint(name).dofadr[0])
-        return JointState(names, self.data.qpos[addresses].copy(), self.data.qvel[dofs].copy(),
+        names, qpos, dofs = self._joint_layout
+        return JointState(names, self.data.qpos[qpos].copy(), self.data.qvel[dofs].copy(),
                           self.data.qfrc_actuator[dofs].copy())
 
     # --- commands -------------------------------------------------------------------------
@@ -255,11 +253,13 @@ class Cell:
     def step(self, count: int = 1) -> None:
         watchdog = self.config.control.watchdog
         for _ in range(count):
-            mujoco.mj_kinematics(self.model, self.data)
-            mujoco.mj_comPos(self.model, self.data)
+            moving = [arm for arm in self.arms.values()
+                      if self.time - arm.command_time <= watchdog and np.any(arm.twist)]
+            if moving:   # Jacobians need the kinematics of the current state; a still cell skips them
+                mujoco.mj_kinematics(self.model, self.data)
+                mujoco.mj_comPos(self.model, self.data)
             for arm in self.arms.values():
-                moving = self.time - arm.command_time <= watchdog and np.any(arm.twist)
-                self.data.ctrl[arm.actuators] = self.joint_velocities(arm, arm.twist) if moving else 0.0
+                self.data.ctrl[arm.actuators] = self.joint_velocities(arm, arm.twist) if arm in moving else 0.0
             mujoco.mj_step(self.model, self.data)
 
     def run(self, seconds: float) -> None:
@@ -351,7 +351,6 @@ class Cell:
             return self._place(object_in_gripper, grip_force or spec.max_force)
         except CellError:
             if previous is not None:
-                self.object, self.model = previous[0], previous[1]
                 self._bind(previous[0], previous[1])
                 self.data = previous[2]
             raise

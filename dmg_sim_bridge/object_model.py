@@ -16,13 +16,11 @@ from scipy.spatial.transform import Rotation
 
 from dmg_perception.tags import printed_size, tag_image, tag_pose
 from dmg_planner.objects import ObjectModel
+from dmg_sim_bridge.mjcf import vector
 
 TAG_THICKNESS = 0.0002   # half-thickness of a tag's visual box [m]; lifted this far off the face
 TAG_CELL_PIXELS = 16     # texture resolution: pixels per tag cell
 
-
-def _vector(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in values)
 
 
 def write_tag_textures(model: ObjectModel, directory: Path) -> dict[int, Path]:
@@ -48,8 +46,8 @@ def object_mjcf(model: ObjectModel, texture_dir: Path, body_name: str = "object"
     textures = write_tag_textures(model, texture_dir)
     assets, geoms = [], []
     for index, part in enumerate(model.parts):
-        geoms.append(f'<geom name="{body_name}_part{index}" type="box" size="{_vector(part.size / 2)}" '
-                     f'pos="{_vector(part.center)}" density="{density:.9g}" rgba="0.85 0.65 0.35 1" {geom_defaults}/>')
+        geoms.append(f'<geom name="{body_name}_part{index}" type="box" size="{vector(part.size / 2)}" '
+                     f'pos="{vector(part.center)}" density="{density:.9g}" rgba="0.85 0.65 0.35 1" {geom_defaults}/>')
     for tag in model.apriltags:
         rotation, centre = tag_pose(tag)
         x, y, z, w = Rotation.from_matrix(rotation).as_quat()
@@ -58,8 +56,8 @@ def object_mjcf(model: ObjectModel, texture_dir: Path, body_name: str = "object"
                       f'<material name="{body_name}_tag{tag.id}" texture="{body_name}_tag{tag.id}" specular="0" '
                       f'shininess="0"/>')
         geoms.append(f'<geom name="{body_name}_tag{tag.id}" type="box" size="{half:.9g} {half:.9g} {TAG_THICKNESS}" '
-                     f'pos="{_vector(centre + rotation[:, 2] * TAG_THICKNESS)}" quat="{_vector([w, x, y, z])}" '
+                     f'pos="{vector(centre + rotation[:, 2] * TAG_THICKNESS)}" quat="{vector([w, x, y, z])}" '
                      f'material="{body_name}_tag{tag.id}" contype="0" conaffinity="0" density="0" group="1"/>')
     joint = f'<freejoint name="{body_name}_free"/>' if free else ""
-    body = f'<body name="{body_name}" pos="{_vector(position)}">{joint}{"".join(geoms)}</body>'
+    body = f'<body name="{body_name}" pos="{vector(position)}">{joint}{"".join(geoms)}</body>'
     return "".join(assets), body

@@ -16,6 +16,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from dmg_planner.objects import config_dir
+from dmg_sim_bridge.mjcf import vector
 
 LINK_RADIUS = 0.045   # capsule radius of the drawn links [m]
 # Joint ranges are written in radians: the model that holds the arm needs this compiler setting.
@@ -47,9 +48,6 @@ def frame(entry: dict) -> Frame:
     return Frame(np.asarray(entry["xyz"], float), np.asarray(entry["rpy"], float))
 
 
-def _vector(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in values)
-
 
 def arm_mjcf(side: str, robot: dict, body_attributes: str = "", joint_attributes: str = "",
              hand_children: str = "") -> str:
@@ -60,29 +58,29 @@ def arm_mjcf(side: str, robot: dict, body_attributes: str = "", joint_attributes
     hand body (the gripper, the camera). The enclosing model must declare COMPILER (radian angles)."""
     mount = frame(robot["arm_mounts"][side])
     closing = []
-    xml = [f'<body name="{side}_arm_mount" pos="{_vector(mount.xyz)}" quat="{_vector(mount.quaternion_wxyz)}">']
+    xml = [f'<body name="{side}_arm_mount" pos="{vector(mount.xyz)}" quat="{vector(mount.quaternion_wxyz)}">']
     joints = robot["joints"]
     for index, joint in enumerate(joints):
         origin = frame(joint)
         following = frame(joints[index + 1]).xyz if index + 1 < len(joints) else frame(robot["hand"]).xyz
         inertia = 0.4 * joint["mass"] * LINK_RADIUS**2
-        xml.append(f'<body name="{side}_{joint["name"]}_link" pos="{_vector(origin.xyz)}" '
-                   f'quat="{_vector(origin.quaternion_wxyz)}" {body_attributes}>'
+        xml.append(f'<body name="{side}_{joint["name"]}_link" pos="{vector(origin.xyz)}" '
+                   f'quat="{vector(origin.quaternion_wxyz)}" {body_attributes}>'
                    f'<joint name="{side}_{joint["name"]}" axis="0 0 1" range="{joint["lower"]} {joint["upper"]}" '
                    f'actuatorfrcrange="{-joint["effort"]} {joint["effort"]}" damping="{robot["joint_damping"]}" '
                    f'{joint_attributes}/>'
                    f'<inertial pos="0 0 0" mass="{joint["mass"]}" diaginertia="{inertia} {inertia} {inertia}"/>'
-                   f'<geom type="capsule" fromto="0 0 0 {_vector(following)}" size="{LINK_RADIUS}" '
+                   f'<geom type="capsule" fromto="0 0 0 {vector(following)}" size="{LINK_RADIUS}" '
                    f'rgba="0.6 0.1 0.1 1" contype="0" conaffinity="0" group="2"/>')
         closing.append("</body>")
     hand = frame(robot["hand"])
     endpoint = frame(robot["gripper_base"]).matrix() @ frame(robot["endpoint"]).matrix()   # in the hand frame
     camera = frame(robot["hand_camera"])
-    xml.append(f'<body name="{side}_hand" pos="{_vector(hand.xyz)}" quat="{_vector(hand.quaternion_wxyz)}" '
+    xml.append(f'<body name="{side}_hand" pos="{vector(hand.xyz)}" quat="{vector(hand.quaternion_wxyz)}" '
                f'{body_attributes}>'
                f'<inertial pos="0 0 0" mass="{robot["hand"]["mass"]}" diaginertia="1e-4 1e-4 1e-4"/>'
-               f'<site name="{side}_endpoint" pos="{_vector(endpoint[:3, 3])}" '
-               f'quat="{_vector(Frame(np.zeros(3), Rotation.from_matrix(endpoint[:3, :3]).as_euler("xyz")).quaternion_wxyz)}"/>'
-               f'<site name="{side}_hand_camera" pos="{_vector(camera.xyz)}" quat="{_vector(camera.quaternion_wxyz)}"/>'
+               f'<site name="{side}_endpoint" pos="{vector(endpoint[:3, 3])}" '
+               f'quat="{vector(Frame(np.zeros(3), Rotation.from_matrix(endpoint[:3, :3]).as_euler("xyz")).quaternion_wxyz)}"/>'
+               f'<site name="{side}_hand_camera" pos="{vector(camera.xyz)}" quat="{vector(camera.quaternion_wxyz)}"/>'
                f'{hand_children}</body>')
     return "".join(xml) + "".join(closing) + "</body>"

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from dmg_planner.objects import ObjectModel
 from dmg_sim_bridge.gripper import gripper_mjcf
+from dmg_sim_bridge.mjcf import vector
 from dmg_sim_bridge.object_model import object_mjcf
 from dmg_sim_bridge.robot_model import COMPILER, arm_mjcf, frame
 from dmg_sim_bridge.sim_config import ARM_ROLES, SimConfig
@@ -22,9 +23,6 @@ from dmg_sim_bridge.sim_config import ARM_ROLES, SimConfig
 OBJECT_BODY = "object"
 PIXEL_PITCH = 1e-5   # m; only scales MuJoCo's sensor size, the image depends on pixels alone
 
-
-def _vector(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in values)
 
 
 def camera_name(role: str) -> str:
@@ -41,9 +39,9 @@ def camera_mjcf(config: SimConfig, robot: dict) -> str:
     x, y, z, w = (Rotation.from_euler("xyz", optical.rpy) * Rotation.from_euler("x", np.pi)).as_quat()
     # MuJoCo's principal-point offset moves the image the opposite way in u (measured).
     offset = ((camera.width - 1) / 2 - camera.cx, camera.cy - (camera.height - 1) / 2)
-    return (f'<camera name="{camera_name(camera.arm)}" pos="{_vector(optical.xyz)}" quat="{_vector([w, x, y, z])}" '
+    return (f'<camera name="{camera_name(camera.arm)}" pos="{vector(optical.xyz)}" quat="{vector([w, x, y, z])}" '
             f'resolution="{camera.width} {camera.height}" focalpixel="{camera.fx} {camera.fy}" '
-            f'principalpixel="{_vector(offset)}" sensorsize="{camera.width * PIXEL_PITCH} {camera.height * PIXEL_PITCH}"/>')
+            f'principalpixel="{vector(offset)}" sensorsize="{camera.width * PIXEL_PITCH} {camera.height * PIXEL_PITCH}"/>')
 
 
 def cell_mjcf(config: SimConfig, robot: dict, model: ObjectModel, texture_dir: Path) -> str:
@@ -57,7 +55,7 @@ def cell_mjcf(config: SimConfig, robot: dict, model: ObjectModel, texture_dir: P
     for role in ARM_ROLES:
         side = config.arms[role]
         gripper = gripper_mjcf(role, spec, body_attributes='gravcomp="1"')
-        children = (f'<body name="{role}_gripper" pos="{_vector(endpoint[:3, 3])}" gravcomp="1">'
+        children = (f'<body name="{role}_gripper" pos="{vector(endpoint[:3, 3])}" gravcomp="1">'
                     f'{gripper.bodies}</body>')
         if config.camera.arm == role:
             children += camera_mjcf(config, robot)
@@ -84,7 +82,7 @@ def cell_mjcf(config: SimConfig, robot: dict, model: ObjectModel, texture_dir: P
         '<light pos="1.5 0 0.5" dir="-1 0 -0.3" directional="true" diffuse="0.4 0.4 0.4"/>'
         '<light pos="0 -1.5 0.5" dir="0 1 -0.3" directional="true" diffuse="0.3 0.3 0.3"/>'
         '<light pos="0 1.5 0.5" dir="0 -1 -0.3" directional="true" diffuse="0.3 0.3 0.3"/>'
-        f'<geom name="table" type="box" pos="{_vector(table["center"])}" size="{_vector(np.asarray(table["size"]) / 2)}" '
+        f'<geom name="table" type="box" pos="{vector(table["center"])}" size="{vector(np.asarray(table["size"]) / 2)}" '
         'rgba="0.45 0.45 0.5 1"/>'
         '<body name="torso"><geom type="box" pos="-0.05 0 -0.1" size="0.12 0.18 0.3" rgba="0.55 0.1 0.1 1" '
         'contype="0" conaffinity="0" group="2"/>'

@@ -32,6 +32,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must precede the first mujoco import
 
 import rclpy  # noqa: E402
@@ -59,7 +61,7 @@ IMAGE_QOS = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)   # reli
 @dataclass
 class ResetRequest:
     object_name: str
-    object_in_gripper: object
+    object_in_gripper: np.ndarray | None   # 4x4, None = the object's default grasp
     grip_force: float
     done: threading.Event = field(default_factory=threading.Event)
     result: ResetResult | None = None
