@@ -8,6 +8,9 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
+from typing import Any
+
+import yaml
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -40,3 +43,18 @@ def ros_environment(base: dict[str, str] | None = None) -> dict[str, str]:
 def apply_ros_environment() -> None:
     """Complete os.environ in place; call before rclpy.init() so the DDS profile applies."""
     os.environ.update(ros_environment())
+
+
+def load_parameter_spec(name: str) -> dict[str, dict[str, Any]]:
+    """The `parameters` mapping of config/<name>.yaml (defaults, descriptions, ranges)."""
+    path = config_dir() / f"{name}.yaml"
+    document = yaml.safe_load(Path(path).read_text()) or {}
+    spec = document.get("parameters")
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path} has no 'parameters' mapping")
+    return spec
+
+
+def parameter_defaults(name: str) -> dict[str, Any]:
+    """The default value of every parameter in config/<name>.yaml (for ROS-free cores and tests)."""
+    return {key: entry["value"] for key, entry in load_parameter_spec(name).items()}

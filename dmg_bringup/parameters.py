@@ -14,24 +14,12 @@ defaults as usual; a value outside its range is refused by rclpy with a clear er
 """
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
-import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from dmg_bringup.environment import config_dir
-
-
-def load_parameter_spec(name: str) -> dict[str, dict[str, Any]]:
-    """The `parameters` mapping of config/<name>.yaml."""
-    path = config_dir() / f"{name}.yaml"
-    document = yaml.safe_load(Path(path).read_text()) or {}
-    spec = document.get("parameters")
-    if not isinstance(spec, dict):
-        raise ValueError(f"{path} has no 'parameters' mapping")
-    return spec
+from dmg_bringup.environment import load_parameter_spec
 
 
 def _descriptor(name: str, entry: dict[str, Any]) -> ParameterDescriptor:

@@ -83,22 +83,24 @@ def translation_push(surface: ObjectSurface, contact, translation) -> PushPoint:
 
 
 def rotation_push(surface: ObjectSurface, contact, outward_normal, towards_palm, angle: float,
-                  depth: float, inset: float) -> PushPoint:
+                  depth: float, inset: float, palm_side: bool = False) -> PushPoint:
     """Push point for a ROTATION of the finger by `angle` about the outward contact normal.
 
     `towards_palm`: direction from the contact along the finger to the palm (object frame).
     The push line runs `inset` below the contact face (inside the object, not grazing it)
-    and `depth` beyond the contact away from the palm (the lever arm about the grasp axis).
+    and `depth` from the contact along the finger: beyond it, away from the palm (the paper's
+    choice, a lever where the object is free), or with `palm_side` between the fingers towards
+    the palm, which turns the object the same way from the opposite side.
     """
     normal = _unit(outward_normal, "contact normal")
     palm = _unit(towards_palm - (towards_palm @ normal) * normal, "finger direction")
     if not np.isfinite(angle) or abs(angle) < 1e-9:
         raise PushError(f"rotation angle {angle} is not a rotation")
     sideways = np.cross(normal, palm)
-    # Pushing at contact - depth*palm along -side*sideways gives a torque side*depth about the normal
-    # (r x F with r = -depth*palm, F = -side*sideways: depth*side*(palm x sideways) = depth*side*normal;
-    # the inset along the normal adds no torque about it).
+    lever = depth if palm_side else -depth        # along `palm`
+    # Pushing at contact + lever*palm along -side*sideways gives a torque about the normal of
+    # (lever*palm) x (-side*sideways) = -lever*side*normal (the inset along the normal adds none).
     # The object must turn by -angle about the normal.
-    side = -np.sign(angle)
-    target = np.asarray(contact, float) - depth * palm - inset * normal
+    side = np.sign(angle) * np.sign(lever)
+    target = np.asarray(contact, float) + lever * palm - inset * normal
     return _checked(surface, target, -side * sideways, "rotation")

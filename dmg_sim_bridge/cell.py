@@ -53,6 +53,7 @@ class Arm:
     site: int                     # grasp site id
     finger_qpos: np.ndarray
     finger_actuators: np.ndarray
+    posture: np.ndarray | None = None   # home joint angles, kept in the task's null space
     twist: np.ndarray = field(default_factory=lambda: np.zeros(6))
     command_time: float = -math.inf
 
@@ -232,7 +233,8 @@ class Cell:
 
     # --- stepping -------------------------------------------------------------------------
     def joint_velocities(self, arm: Arm, twist: np.ndarray) -> np.ndarray:
-        """Joint velocities realising `twist` at the grasp site, within joint position and speed limits."""
+        """Joint velocities realising `twist` at the grasp site, within joint position and speed limits;
+        the redundant joint moves, unseen by the task, back towards the home posture."""
         control = self.config.control
         jacobian = self._jacobian
         mujoco.mj_jacSite(self.model, self.data, jacobian[:3], jacobian[3:], arm.site)
@@ -243,6 +245,10 @@ class Cell:
             velocity = np.zeros(len(arm.dofs))
             velocity[free] = damped_least_squares(columns[:, free], twist, control.dls_damping,
                                                   control.singular_threshold)
+            if arm.posture is not None:
+                task = columns[:, free]
+                nullspace = np.eye(task.shape[1]) - np.linalg.pinv(task) @ task
+                velocity[free] += control.posture_gain * nullspace @ (arm.posture - reference)[free]
             blocked = ((reference <= arm.lower + control.joint_limit_margin) & (velocity < 0)) | (
                 (reference >= arm.upper - control.joint_limit_margin) & (velocity > 0))
             if not np.any(blocked & free):
@@ -361,6 +367,7 @@ class Cell:
             q = self.solve_arm(role, self.config.home[role])
             data.qpos[arm.qpos] = q
             data.act[arm.activations] = q
+            arm.posture = q.copy()
             self.stop(role)
         mujoco.mj_kinematics(model, data)
         if object_in_gripper is None:

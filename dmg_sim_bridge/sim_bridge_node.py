@@ -14,6 +14,8 @@ Publishes:  /clock (rosgraph_msgs/Clock)                 simulated time, clock_r
 Subscribes: arm1/cmd_vel, arm2/cmd_vel (geometry_msgs/TwistStamped, base frame): grasp-frame
             velocity; none for 100 ms (config/sim.yaml control.watchdog) -> the arm holds still
             arm1/gripper/command, arm2/gripper/command (dmg_interfaces/GripperCommand)
+            sim/camera_covered (std_msgs/Bool): fault injection - true puts a lens cap on the
+                                                         wrist camera (black images), false takes it off
 Services:   sim/reset (dmg_interfaces/ResetScene): arms home, object held in gripper 1
 Parameters: config/sim_bridge.yaml; the cell itself: config/sim.yaml.
 
@@ -43,6 +45,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
+from std_msgs.msg import Bool  # noqa: E402
 
 from dmg_bringup.node_main import run_node  # noqa: E402
 from dmg_bringup.geometry_messages import pose_message, time_message, transform_from_pose  # noqa: E402
@@ -100,6 +103,8 @@ class SimBridgeNode(Node):
         self.image_pub = self.create_publisher(Image, f"{camera.arm}/camera/image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, f"{camera.arm}/camera/camera_info", IMAGE_QOS)
         self.camera_pose_pub = self.create_publisher(PoseStamped, f"{camera.arm}/camera/pose", 10)
+        self.camera_covered = False
+        self.create_subscription(Bool, "sim/camera_covered", self.on_camera_covered, 10)
         self.create_service(ResetScene, "sim/reset", self.on_reset)
         self.create_timer(1.0, self.publish_diagnostics)
         self.thread = threading.Thread(target=self.simulate, name="simulation", daemon=True)
@@ -120,6 +125,11 @@ class SimBridgeNode(Node):
             self.refuse(f"{role}/cmd_vel refused: non-finite velocity {values}")
         else:
             self.commands.put(("twist", role, values))
+
+    def on_camera_covered(self, msg: Bool) -> None:
+        if bool(msg.data) != self.camera_covered:
+            self.camera_covered = bool(msg.data)
+            self.get_logger().warning(f"wrist camera {'covered: images are black' if msg.data else 'uncovered'}")
 
     def refuse(self, text: str) -> None:
         self.statistics["commands_refused"] += 1
@@ -177,6 +187,8 @@ class SimBridgeNode(Node):
                     next_state += state_period
                 if now >= next_camera - 1e-9:
                     image = cell.render()
+                    if self.camera_covered:
+                        image = np.zeros_like(image)
                     self.publish_camera(image)
                     if recorder is not None:
                         recorder.add(image)

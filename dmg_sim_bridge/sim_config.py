@@ -20,6 +20,7 @@ class ControlSpec:
     dls_damping: float
     singular_threshold: float
     joint_limit_margin: float
+    posture_gain: float
     max_linear_speed: float
     max_angular_speed: float
     watchdog: float

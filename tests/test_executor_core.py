@@ -58,12 +58,13 @@ def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surfa
     # Finger on the top face (outward normal +z) pointing to the palm along -x.
     contact, normal, palm = np.array([0.0, 0.0, 0.02]), np.array([0, 0, 1.0]), np.array([-1.0, 0, 0])
     for angle in (0.4, -0.4):
-        push = rotation_push(box_surface, contact, normal, palm, angle, depth=0.03, inset=0.005)
-        assert push.point[0] == pytest.approx(0.03) and push.point[2] == pytest.approx(0.015)
-        assert abs(push.point[1]) == pytest.approx(0.03)          # on a +-y side face
-        lever = push.point - contact
-        torque = np.cross(lever, push.direction) @ normal        # about the outward normal
-        assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
+        for palm_side, lever in ((False, 0.03), (True, -0.03)):
+            push = rotation_push(box_surface, contact, normal, palm, angle, depth=0.03, inset=0.005,
+                                 palm_side=palm_side)
+            assert push.point[0] == pytest.approx(lever) and push.point[2] == pytest.approx(0.015)
+            assert abs(push.point[1]) == pytest.approx(0.03)          # on a +-y side face
+            torque = np.cross(push.point - contact, push.direction) @ normal   # about the outward normal
+            assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
 
 
 def test_push_points_that_do_not_exist_are_refused(box_surface):

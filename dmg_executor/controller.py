@@ -1,0 +1,601 @@
+"""Executing a repositioning plan with two grippers, closed loop on the perceived object pose.
+
+Paper section V. Gripper 1 (the holder) holds the object, gripper 2 (the pusher) pushes it.
+Every primitive is done in one or more pushes, each an explicit sequence of steps:
+
+  FIND_CONTACT  nothing moves; from the perceived pose, the push point on the object mesh
+                (push_points) and a collision-free route to it (routes) are computed.
+  APPROACH      the pusher follows the route to `gap` in front of the push point.
+  EXECUTE       the holder's fingers loosen (P control of the finger distance), the relative
+                motion pushes the object - a translation v = -m t' with m from a P controller
+                on the remaining contact displacement, or a rotation about the grasp axis at
+                a P-controlled rate, the pusher following the object on its arc - split
+                between the arms by the ECTS coordination alpha; then the grip tightens.
+  LEAVE         the pusher backs out along the push line.
+
+The target of primitive k is the object pose in the holder's frame that puts the gripper at
+the primitive's `gripper_after` (the planner's gripper pose in the object frame), so errors
+left by one push are corrected by the next. After the last primitive the pusher returns to
+where it started. Any fault stops both arms with the object held tight and ends the run with
+an Outcome; `cancel` does the same on request.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dmg_executor.ects import arm_twists
+from dmg_executor.push_points import ObjectSurface, PushError, rotation_push, translation_push
+from dmg_executor.routes import KeepOut, RouteError, keep_out, route
+from dmg_executor.settings import ExecutorSettings
+from dmg_executor.views import CameraModel, TagLayout, best_orientation, turns
+from dmg_planner.primitives import Primitive, PrimitiveKind
+from dmg_planner.transforms import distance, invert
+
+MAX_PUSHES_PER_PRIMITIVE = 4
+MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
+RETRY_FACTOR = 2.0    # another push when the remaining error exceeds this many tolerances
+WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
+EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
+
+
+class Unwatched(PushError):
+    """Every push that would do the job starts where the camera cannot see the object."""
+
+
+class Step(IntEnum):
+    """Same values as the feedback steps of dmg_interfaces/action/ExecuteRepositioning."""
+
+    FIND_CONTACT = 0
+    APPROACH = 1
+    EXECUTE = 2
+    LEAVE = 3
+
+
+class Outcome(IntEnum):
+    """Same values as the result codes of dmg_interfaces/action/ExecuteRepositioning."""
+
+    OK = 0
+    BAD_REQUEST = 1
+    PLANNING_FAILED = 2
+    OBJECT_LOST = 3
+    SLIP = 4
+    STEP_TIMEOUT = 5
+    CANCELED = 6
+    LIMIT_VIOLATION = 7
+    OUT_OF_TOLERANCE = 8
+
+
+@dataclass
+class Observation:
+    """What the executor knows at one control tick (base frame unless said otherwise)."""
+
+    time: float                              # s, the controller's clock
+    holder: np.ndarray                       # 4x4 holding gripper's grasp frame
+    pusher: np.ndarray                       # 4x4 pushing gripper's grasp frame
+    object_in_holder: np.ndarray | None      # 4x4 latest perceived object pose in the holder's frame
+    object_time: float                       # s, when that pose was seen (-inf: never)
+    opening: float                           # m between the holder's fingertips
+
+
+@dataclass
+class GripCommand:
+    opening: float      # m
+    max_force: float    # N per finger
+
+
+@dataclass
+class Command:
+    holder: np.ndarray = field(default_factory=lambda: np.zeros(6))   # twist (linear, angular) of the holder's grasp frame
+    pusher: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    holder_grip: GripCommand | None = None
+    pusher_grip: GripCommand | None = None
+
+
+@dataclass
+class Progress:
+    primitive_index: int
+    primitive_count: int
+    step: Step
+    contact_error: float     # m, remaining principal contact displacement of the current primitive
+    angle_error: float       # rad, remaining angle about the grasp axis
+    pushes: int              # pushes done on the current primitive
+
+
+@dataclass
+class Result:
+    outcome: Outcome
+    message: str
+    primitives_completed: int
+    position_error: float    # m, principal contact vs the goal contact (nan if never seen)
+    angle_error: float       # rad, gripper orientation vs the goal's
+    duration: float          # s
+
+
+@dataclass
+class _Push:
+    """One push: where it happens, in the base frame at FIND_CONTACT time, and its route."""
+
+    direction: np.ndarray     # the object's motion at the push point, base frame
+    local_direction: np.ndarray   # the same in the holder's frame
+    start: np.ndarray         # where the pusher's centre stops before the push
+    waypoints: list[np.ndarray]   # route ending at `start`
+    orientations: list[np.ndarray]   # pusher orientation wanted at each waypoint (camera on the object)
+    lever: float              # m, pusher distance from the grasp axis (rotations)
+
+
+def _rotation_about_axis(rotation: np.ndarray) -> float:
+    """Angle [rad] of a rotation (holder frame) about the grasp axis x."""
+    return float(Rotation.from_matrix(rotation).as_rotvec()[0])
+
+
+def _shift(twist: np.ndarray, from_point: np.ndarray, to_point: np.ndarray) -> np.ndarray:
+    """The same rigid motion as a twist at another point."""
+    return np.concatenate([twist[:3] + np.cross(twist[3:], to_point - from_point), twist[3:]])
+
+
+class PlanExecutor:
+    """The state machine of one plan; call `update` every control tick with a fresh Observation."""
+
+    def __init__(self, settings: ExecutorSettings, surface: ObjectSurface, primitives: list[Primitive],
+                 principal_finger: int, alpha: float, start_time: float, camera: CameraModel | None = None,
+                 tags: TagLayout | None = None):
+        if not 0.0 <= alpha <= 1.0:
+            raise ValueError(f"ECTS coordination alpha must be in [0, 1], got {alpha}")
+        if principal_finger not in (0, 1):
+            raise ValueError(f"principal_finger must be 0 or 1, got {principal_finger}")
+        missing = [k for k, p in enumerate(primitives) if p.gripper_after is None]
+        if missing:
+            raise ValueError(f"primitives {missing} carry no gripper_after pose: plan with this planner version")
+        self.settings, self.surface, self.primitives = settings, surface, list(primitives)
+        self.plan_length = len(primitives)
+        self.notes: list[str] = []      # primitives that could not be finished, and why
+        self.camera, self.tags = camera, tags
+        self.turns = turns(settings.tilt_limit, settings.roll_limit) if camera is not None and tags is not None else None
+        self.principal_finger, self.alpha = principal_finger, float(alpha)
+        self.started = start_time
+        self.index, self.pushes, self.step = 0, 0, Step.FIND_CONTACT
+        self.step_started = start_time
+        self.result: Result | None = None
+        self.push: _Push | None = None
+        self.retreat: np.ndarray | None = None
+        self.waypoint = 0
+        self.held_reference: np.ndarray | None = None   # object pose the grip must keep, or None while pushing
+        self.pushed_reference: np.ndarray | None = None
+        self.grip_until = -math.inf
+        self.phase = ""
+        self.holder_start: np.ndarray | None = None
+        self.pusher_home: np.ndarray | None = None
+        self.returning = False
+        self.last = Observation(start_time, np.eye(4), np.eye(4), None, -math.inf, 0.0)
+        self.errors = (math.nan, math.nan)
+
+    # --- public ------------------------------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return self.result is not None
+
+    def progress(self) -> Progress:
+        return Progress(min(self.index, len(self.primitives) - 1) if self.primitives else 0, len(self.primitives),
+                        self.step, self.errors[0], self.errors[1], self.pushes)
+
+    def update(self, observation: Observation) -> Command:
+        """One control tick: the arms' twists and any gripper command."""
+        if self.done:
+            return self._halt()
+        self.last = observation
+        if self.holder_start is None:
+            self.holder_start, self.pusher_home = observation.holder.copy(), observation.pusher.copy()
+            command = self._tick(observation)
+            command.pusher_grip = GripCommand(0.0, 0.0)     # pusher closed: its fingertips push together
+            return command
+        return self._tick(observation)
+
+    def cancel(self, reason: str = "cancelled on request") -> Command:
+        self._finish(Outcome.CANCELED, reason)
+        return self._halt()
+
+    # --- the state machine ---------------------------------------------------------------------
+    def _tick(self, obs: Observation) -> Command:
+        s = self.settings
+        # While the grip is closed and nothing pushes, the object cannot move: the camera may lose it
+        # for longer (the pusher's hand turns and passes the object), but never while pushing.
+        limit = s.stale_after if self.step == Step.EXECUTE else s.stale_after_held
+        if obs.object_in_holder is None or obs.time - obs.object_time > limit:
+            age = "never seen" if obs.object_in_holder is None else f"last seen {obs.time - obs.object_time:.2f} s ago"
+            return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {limit:.2f} s) during "
+                               f"{self.step.name} of primitive {self.index}: stopped with the object held")
+        fault = self._limits(obs) or self._slip(obs)
+        if fault:
+            return self._abort(*fault)
+        if obs.time - self.step_started > s.step_timeout:
+            return self._abort(Outcome.STEP_TIMEOUT, f"{self.step.name} of primitive {self.index} did not finish in "
+                               f"{s.step_timeout:.1f} s (contact error {self.errors[0] * 1000:.1f} mm, angle error "
+                               f"{np.rad2deg(self.errors[1]):.1f} deg)")
+        self._measure(obs)
+        handler = self._finish_plan if self.returning else {
+            Step.FIND_CONTACT: self._find_contact, Step.APPROACH: self._approach, Step.EXECUTE: self._execute,
+            Step.LEAVE: self._leave}[self.step]
+        return handler(obs)
+
+    def _enter(self, step: Step, obs: Observation, held: bool = True) -> None:
+        self.step, self.step_started = step, obs.time
+        self.held_reference = obs.object_in_holder.copy() if held else None
+
+    def _find_contact(self, obs: Observation) -> Command:
+        while self.index < len(self.primitives) and self._primitive_finished():
+            self.index, self.pushes = self.index + 1, 0
+            if self.index == len(self.primitives):
+                self._add_correction(obs)
+            self._measure(obs)
+        if self.index >= len(self.primitives):
+            return self._finish_plan(obs)
+        primitive = self.primitives[self.index]
+        try:
+            self.push = self._plan_push(primitive, obs)
+        except Unwatched as error:
+            self.notes.append(f"primitive {self.index} left at {self.errors[0] * 1000:.1f} mm, "
+                              f"{np.rad2deg(self.errors[1]):.1f} deg: {error}")
+            self.index, self.pushes = self.index + 1, 0
+            return Command()
+        except (PushError, RouteError) as error:
+            return self._abort(Outcome.LIMIT_VIOLATION, f"primitive {self.index} ({primitive.kind.name.lower()}): "
+                               f"no safe push: {error}")
+        outside = [p for p in self.push.waypoints + [self.push.start]
+                   if np.any(p < self.settings.workspace_min) or np.any(p > self.settings.workspace_max)]
+        if outside:
+            return self._abort(Outcome.LIMIT_VIOLATION, f"primitive {self.index}: the push needs the pusher at "
+                               f"{np.round(outside[0], 3).tolist()} m, outside the workspace")
+        self.waypoint = 0
+        self._enter(Step.APPROACH, obs)
+        return Command()
+
+    def _add_correction(self, obs: Observation) -> None:
+        """The plan is done but the grasp is not where it should be (a rotation also slides the object,
+        a push also turns it a little): one more translation or rotation to the goal grasp, the larger
+        error first, up to MAX_CORRECTIONS."""
+        s = self.settings
+        self.index -= 1
+        self._measure(obs)
+        self.index += 1
+        position, angle = self.errors[0] / s.position_tolerance, abs(self.errors[1]) / s.angle_tolerance
+        if max(position, angle) <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
+            return
+        kind = PrimitiveKind.TRANSLATION if position >= angle else PrimitiveKind.ROTATION
+        self.primitives.append(replace(self.primitives[-1], kind=kind))
+
+    def _primitive_finished(self) -> bool:
+        """Within tolerance, or close enough after a push, or out of pushes."""
+        primitive = self.primitives[self.index]
+        position_error, angle_error = self.errors
+        error, tolerance = ((position_error, self.settings.position_tolerance)
+                            if primitive.kind == PrimitiveKind.TRANSLATION
+                            else (abs(angle_error), self.settings.angle_tolerance))
+        return (error <= tolerance or (self.pushes > 0 and error <= RETRY_FACTOR * tolerance)
+                or self.pushes >= MAX_PUSHES_PER_PRIMITIVE)
+
+    def _plan_push(self, primitive: Primitive, obs: Observation) -> _Push:
+        """The push for what remains of `primitive`: the best-seen of the possible push points,
+        with its route and the pusher's orientations along it."""
+        s = self.settings
+        holder_in_object = invert(obs.object_in_holder)
+        middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
+        if primitive.kind == PrimitiveKind.TRANSLATION:
+            # Along the remaining motion (holder frame), or along one of its components across the grasp
+            # axis when the camera cannot watch that push (it would need the pusher behind the object).
+            motion = self._remaining_motion(obs)
+            directions = [motion] + [motion[k] * np.eye(3)[k] for k in (1, 2) if abs(motion[k]) > s.position_tolerance]
+            pushes, problems = [], []
+            for direction in directions:
+                try:   # the contact moves over the object opposite to the object's motion
+                    pushes.append(translation_push(self.surface, middle, -(holder_in_object[:3, :3] @ direction)))
+                except PushError as error:
+                    problems.append(str(error))
+            if not pushes:
+                raise PushError("; ".join(problems))
+            candidates = self._watched(obs, pushes)
+            # The most progress: the full motion when the camera can watch it.
+            return max(candidates, key=lambda c: float(motion @ (invert(obs.holder)[:3, :3] @ c[0].direction)))[0]
+        else:
+            limited = float(np.clip(self.errors[1], -s.max_push_angle, s.max_push_angle))
+            # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
+            # can be beyond the fingertips or, if it fits, between the fingers towards the palm.
+            sides = (False, True) if s.push_depth + 2 * s.tip_radius + s.clearance < s.finger_length else (False,)
+            pushes, problems = [], []
+            for palm_side in sides:
+                try:
+                    pushes.append(rotation_push(self.surface, middle, holder_in_object[:3, 0],
+                                                -holder_in_object[:3, 2], -limited, s.push_depth, 0.0, palm_side))
+                except PushError as error:
+                    problems.append(str(error))
+            if not pushes:
+                raise PushError("; ".join(problems))
+        candidates = self._watched(obs, pushes)
+        return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: beyond the tips
+
+    def _watched(self, obs: Observation, pushes: list) -> list[tuple[_Push, int]]:
+        """Routes for the push points that can be reached and that the camera sees from the push start."""
+        candidates, problems = [], []
+        for push in pushes:
+            try:
+                candidates.append(self._push_from(obs, push))
+            except RouteError as error:
+                problems.append(str(error))
+        if not candidates:
+            raise RouteError("; ".join(problems))
+        if self.turns is None:
+            return candidates
+        watched = [c for c in candidates if c[1] > 0]
+        if not watched:
+            raise Unwatched("the wrist camera would see none of the object's tags from where the push starts "
+                            "(it would need the pusher behind the object)")
+        return watched
+
+    def _push_from(self, obs: Observation, push) -> tuple[_Push, int]:
+        """Route and orientations for a push point (object frame); how many tags the camera sees from its start."""
+        s = self.settings
+        holder = obs.holder
+        object_pose = holder @ obs.object_in_holder
+        point = object_pose[:3, :3] @ push.point + object_pose[:3, 3]
+        direction = object_pose[:3, :3] @ push.direction
+        box = self._keep_out(obs)
+        to_holder = invert(holder)
+        point_h = to_holder[:3, :3] @ point + to_holder[:3, 3]
+        direction_h = to_holder[:3, :3] @ direction
+        outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
+        pusher_h = to_holder[:3, :3] @ obs.pusher[:3, 3] + to_holder[:3, 3]
+        waypoints = [holder[:3, :3] @ w + holder[:3, 3] for w in route(pusher_h, outside_h, box, self._home_in(holder))]
+        # Where the push starts, the tips must not be spread across the push line.
+        across = np.cross(direction, holder[:3, 0])
+        start_orientation, seen = self._view(obs, point, level=across / np.linalg.norm(across))
+        start = point - (self._reach(direction, start_orientation) + s.gap) * direction
+        lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
+        orientations = [self._view(obs, place)[0] for place in waypoints[:-1]] + [start_orientation] * 2
+        return _Push(direction, direction_h, start, waypoints + [start], orientations, lever), seen
+
+    def _view(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """Pusher orientation at `place` that keeps the camera on the object's tags, and how many it
+        sees (without a camera model: the orientation it started in)."""
+        neutral = self.pusher_home[:3, :3]
+        if self.turns is None:
+            return neutral, 0
+        return best_orientation(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral,
+                                self.turns, level)
+
+    def _home_in(self, holder: np.ndarray) -> np.ndarray:
+        """Where the pusher started (its camera's vantage point), in the holder's frame."""
+        return invert(holder)[:3, :3] @ self.pusher_home[:3, 3] + invert(holder)[:3, 3]
+
+    def _reach(self, direction: np.ndarray, orientation: np.ndarray) -> float:
+        """How far the closed fingertips reach from the pusher's grasp frame along `direction`."""
+        across = abs(float(direction @ orientation[:, 0]))   # the two tips sit side by side along its x
+        return self.settings.tip_radius * (1.0 + across)
+
+    def _approach(self, obs: Observation) -> Command:
+        command = self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+        if self._arrived(obs):
+            if self.waypoint == len(self.push.waypoints) - 1 and obs.time - obs.object_time > self.settings.stale_after:
+                return Command()     # at the push start: wait for a fresh pose before loosening the grip
+            self.waypoint += 1
+            if self.waypoint == len(self.push.waypoints):
+                self._enter(Step.EXECUTE, obs)
+                self.phase = "loosen"
+                self.grip_until = obs.time + self.settings.grip_settle
+                return Command(holder_grip=self._loosened(obs))
+        return command
+
+    def _execute(self, obs: Observation) -> Command:
+        s = self.settings
+        if self.phase == "loosen":
+            if obs.time < self.grip_until:
+                return Command(holder_grip=self._loosened(obs))
+            self.phase, self.held_reference = "push", None
+            self.pushed_reference = obs.object_in_holder.copy()
+        if self.phase == "tighten":
+            if obs.time < self.grip_until:
+                return Command()
+            self.pushes += 1
+            self._enter(Step.LEAVE, obs)
+            return Command()
+        primitive = self.primitives[self.index]
+        holder = obs.holder
+        if primitive.kind == PrimitiveKind.TRANSLATION:
+            along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
+            if along <= s.position_tolerance:
+                return self._tighten(obs)
+            speed = float(np.clip(s.linear_gain * along, s.min_push_speed, s.push_speed))
+            # Keep the push line through the grasp axis: an offset across it would turn the object.
+            across = np.cross(self.push.direction, holder[:3, 0])
+            offset = float((obs.pusher[:3, 3] - holder[:3, 3]) @ across)
+            relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across, np.zeros(3)])
+        else:
+            turn = self.errors[1]
+            turned = _rotation_about_axis(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T)
+            budget = float(np.clip(turn + turned, -s.max_push_angle, s.max_push_angle))   # this push's share
+            left = budget - turned
+            if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
+                return self._tighten(obs)
+            lever = max(self.push.lever, 1e-3)
+            rate = float(np.clip(s.angular_gain * abs(left), s.min_push_speed / lever,
+                                 min(s.max_angular_speed, s.push_speed / lever)))
+            relative = np.concatenate([np.zeros(3), np.sign(left) * rate * holder[:3, 0]])   # about the grasp axis
+        command = self._coordinated(obs, relative)
+        command.holder_grip = self._loosened(obs)
+        return command
+
+    def _tighten(self, obs: Observation) -> Command:
+        self.phase = "tighten"
+        self.grip_until = obs.time + self.settings.grip_settle
+        return Command(holder_grip=self._held())
+
+    def _coordinated(self, obs: Observation, relative: np.ndarray) -> Command:
+        """ECTS: the relative motion as a twist at the grasp axis, split by alpha, each arm's share
+        expressed at its own grasp frame."""
+        origin = obs.holder[:3, 3]
+        holder_twist, pusher_twist = arm_twists(np.zeros(6), relative, self.alpha)
+        return Command(holder=_shift(holder_twist, origin, origin), pusher=_shift(pusher_twist, origin, obs.pusher[:3, 3]))
+
+    def _leave(self, obs: Observation) -> Command:
+        if self.retreat is None:
+            # Back out along the push line as the object now lies (a rotation turned it with the pusher).
+            turned = _rotation_about_axis(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T)
+            local = Rotation.from_rotvec([turned, 0.0, 0.0]).apply(self.push.local_direction)
+            box = self._keep_out(obs)
+            to_holder = invert(obs.holder)
+            pusher = to_holder[:3, :3] @ obs.pusher[:3, 3] + to_holder[:3, 3]
+            out = pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local
+            self.retreat = obs.holder[:3, :3] @ out + obs.holder[:3, 3]
+        if np.linalg.norm(self.retreat - obs.pusher[:3, 3]) < self.settings.waypoint_tolerance:
+            self.retreat = None
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
+        return self._go_to(obs, self.retreat)
+
+    def _keep_out(self, obs: Observation) -> KeepOut:
+        s = self.settings
+        return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.tip_radius, 2 * s.tip_radius,
+                        s.clearance)
+
+    def _finish_plan(self, obs: Observation) -> Command:
+        """All primitives done: the pusher goes back to where it started, then the result."""
+        if not self.returning:
+            self.returning = True
+            self.step, self.step_started = Step.LEAVE, obs.time
+            self.held_reference = obs.object_in_holder.copy()
+            box = self._keep_out(obs)
+            to_holder = invert(obs.holder)
+            local = [to_holder[:3, :3] @ p + to_holder[:3, 3] for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+            try:
+                waypoints = route(local[0], local[1], box, local[1])
+            except RouteError as error:
+                return self._abort(Outcome.LIMIT_VIOLATION, f"cannot return the pusher: {error}")
+            places = [obs.holder[:3, :3] @ w + obs.holder[:3, 3] for w in waypoints]
+            orientations = [self._view(obs, place)[0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
+            self.push = _Push(np.zeros(3), np.zeros(3), self.pusher_home[:3, 3].copy(), places, orientations, 0.0)
+            self.waypoint = 0
+        if self._arrived(obs):
+            self.waypoint += 1
+            if self.waypoint == len(self.push.waypoints):
+                position, angle = self.final_errors(obs)
+                corrections = len(self.primitives) - self.plan_length
+                s = self.settings
+                within = position <= s.goal_position_tolerance and angle <= s.goal_angle_tolerance
+                summary = (f"{self.plan_length} primitives and {corrections} corrections done: contact "
+                           f"{position * 1000:.1f} mm and {np.rad2deg(angle):.1f} deg from the goal")
+                if not within:
+                    summary += (f", outside the tolerance of {s.goal_position_tolerance * 1000:.1f} mm and "
+                                f"{np.rad2deg(s.goal_angle_tolerance):.1f} deg")
+                self._finish(Outcome.OK if within else Outcome.OUT_OF_TOLERANCE,
+                             "; ".join([summary] + self.notes), position, angle)
+                return self._halt()
+        return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+
+    # --- motion helpers
+    def _arrived(self, obs: Observation) -> bool:
+        """The pusher is at the current waypoint, turned as wanted there."""
+        offset = np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])
+        turn = Rotation.from_matrix(self.push.orientations[self.waypoint] @ obs.pusher[:3, :3].T).magnitude()
+        last = self.waypoint == len(self.push.waypoints) - 1   # where a push starts: on its line, precisely
+        tolerance = self.settings.position_tolerance if last else self.settings.waypoint_tolerance
+        return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE
+
+    def _go_to(self, obs: Observation, target: np.ndarray, orientation: np.ndarray | None = None) -> Command:
+        """P control of the pusher towards a position (and orientation), speeds limited."""
+        s = self.settings
+        velocity = s.approach_gain * (target - obs.pusher[:3, 3])
+        speed = np.linalg.norm(velocity)
+        if speed > s.approach_speed:
+            velocity *= s.approach_speed / speed
+        angular = np.zeros(3)
+        if orientation is not None:
+            angular = s.approach_gain * Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
+            rate = np.linalg.norm(angular)
+            if rate > s.max_angular_speed:
+                angular *= s.max_angular_speed / rate
+        return Command(pusher=np.concatenate([velocity, angular]))
+
+    def _loosened(self, obs: Observation) -> GripCommand:
+        """P control of the finger distance towards just inside the object's width, at the slide force."""
+        s = self.settings
+        wanted = max(obs.opening - s.slide_squeeze, 0.0)
+        opening = obs.opening + s.finger_gain * (wanted - obs.opening)
+        return GripCommand(max(opening, 0.0), s.slide_force)
+
+    def _held(self) -> GripCommand:
+        return GripCommand(0.0, self.settings.hold_force)
+
+    def _halt(self) -> Command:
+        return Command(holder_grip=self._held())
+
+    # --- measurements and safety -----------------------------------------------------------------------
+    def _target(self) -> np.ndarray:
+        """Object pose in the holder's frame that completes the current primitive."""
+        return invert(self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after)
+
+    def _remaining_motion(self, obs: Observation) -> np.ndarray:
+        """Object displacement (holder frame) still needed, across the grasp axis only."""
+        goal_middle = self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after[:3, 3]
+        where = obs.object_in_holder[:3, :3] @ goal_middle + obs.object_in_holder[:3, 3]
+        motion = -where
+        motion[0] = 0.0       # along the grasp axis the fingers centre the object
+        return motion
+
+    def _measure(self, obs: Observation) -> None:
+        if not self.primitives:
+            self.errors = (0.0, 0.0)
+            return
+        target = self._target()
+        self.errors = (float(np.linalg.norm(self._remaining_motion(obs))),
+                       _rotation_about_axis(target[:3, :3] @ obs.object_in_holder[:3, :3].T))
+
+    def final_errors(self, obs: Observation) -> tuple[float, float]:
+        """(principal contact vs the goal contact [m], gripper orientation vs the goal's [rad])."""
+        if not self.primitives or obs.object_in_holder is None:
+            return (0.0, 0.0) if not self.primitives else (math.nan, math.nan)
+        last = self.primitives[-1]
+        side = -1.0 if self.principal_finger == 0 else 1.0
+        holder_in_object = invert(obs.object_in_holder)
+        contact = holder_in_object[:3, :3] @ np.array([side * obs.opening / 2, 0.0, 0.0]) + holder_in_object[:3, 3]
+        return float(np.linalg.norm(contact - last.contact_after)), distance(holder_in_object, last.gripper_after)[1]
+
+    def _limits(self, obs: Observation) -> tuple[Outcome, str] | None:
+        s = self.settings
+        for name, pose in (("holding", obs.holder), ("pushing", obs.pusher)):
+            where = pose[:3, 3]
+            if np.any(where < s.workspace_min) or np.any(where > s.workspace_max):
+                return Outcome.LIMIT_VIOLATION, (f"the {name} gripper at {np.round(where, 3).tolist()} m left the "
+                                                 f"workspace {s.workspace_min.tolist()} .. {s.workspace_max.tolist()}")
+        travel = float(np.linalg.norm(obs.holder[:3, 3] - self.holder_start[:3, 3]))
+        if travel > s.holder_travel:
+            return Outcome.LIMIT_VIOLATION, (f"the holding gripper moved {travel * 1000:.0f} mm from its start "
+                                             f"(limit {s.holder_travel * 1000:.0f} mm)")
+        return None
+
+    def _slip(self, obs: Observation) -> tuple[Outcome, str] | None:
+        s = self.settings
+        if self.held_reference is not None:
+            moved, turned = distance(self.held_reference, obs.object_in_holder)
+            if moved > s.slip_distance or turned > s.slip_angle:
+                return Outcome.SLIP, (f"the object moved {moved * 1000:.1f} mm and {np.rad2deg(turned):.1f} deg in the "
+                                      f"closed grip during {self.step.name} of primitive {self.index}")
+        elif self.pushed_reference is not None:
+            change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
+            tilt = float(np.linalg.norm(change[1:]))
+            if tilt > s.slip_angle:
+                return Outcome.SLIP, (f"the pushed object tilted {np.rad2deg(tilt):.1f} deg off the grasp axis "
+                                      f"during primitive {self.index}")
+        return None
+
+    def _abort(self, outcome: Outcome, message: str) -> Command:
+        position, angle = self.final_errors(self.last) if self.last.object_in_holder is not None else (math.nan, math.nan)
+        self._finish(outcome, message, position, angle)
+        return self._halt()
+
+    def _finish(self, outcome: Outcome, message: str, position: float = math.nan, angle: float = math.nan) -> None:
+        if self.result is None:
+            completed = self.plan_length if outcome == Outcome.OK else min(self.index, self.plan_length)
+            self.result = Result(outcome, message, completed, position, angle, self.last.time - self.started)
