@@ -68,6 +68,7 @@ class Outcome(IntEnum):
     CANCELED = 6
     LIMIT_VIOLATION = 7
     OUT_OF_TOLERANCE = 8
+    ROBOT_LOST = 9
 
 
 @dataclass
@@ -196,8 +197,11 @@ class PlanExecutor:
         return self._tick(observation)
 
     def cancel(self, reason: str = "cancelled on request") -> Command:
-        self._finish(Outcome.CANCELED, reason)
-        return self._halt()
+        return self.abort(Outcome.CANCELED, reason)
+
+    def abort(self, outcome: Outcome, message: str) -> Command:
+        """End the run from outside (cancel, a dead driver): stop, grip tight."""
+        return self._abort(outcome, message)
 
     # --- the state machine ---------------------------------------------------------------------
     def _tick(self, obs: Observation) -> Command:
@@ -351,7 +355,8 @@ class PlanExecutor:
         waypoints = [holder[:3, :3] @ w + holder[:3, 3] for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         # Where the push starts, the tips must not be spread across the push line.
         across = np.cross(direction, holder[:3, 0])
-        start_orientation, seen = self._view(obs, point, level=across / np.linalg.norm(across))
+        provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
+        start_orientation, seen = self._view(obs, provisional, level=across / np.linalg.norm(across))
         start = point - (self._reach(direction, start_orientation) + s.gap) * direction
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
         orientations = [self._view(obs, place)[0] for place in waypoints[:-1]] + [start_orientation] * 2
@@ -469,13 +474,14 @@ class PlanExecutor:
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
             local = [to_holder[:3, :3] @ p + to_holder[:3, 3] for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+            local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
             try:
                 waypoints = route(local[0], local[1], box, local[1])
             except RouteError as error:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"cannot return the pusher: {error}")
             places = [obs.holder[:3, :3] @ w + obs.holder[:3, 3] for w in waypoints]
             orientations = [self._view(obs, place)[0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
-            self.push = _Push(np.zeros(3), np.zeros(3), self.pusher_home[:3, 3].copy(), places, orientations, 0.0)
+            self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
             self.waypoint = 0
         if self._arrived(obs):
             self.waypoint += 1

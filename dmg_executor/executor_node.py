@@ -1,17 +1,413 @@
-"""executor_node: the ExecuteRepositioning action server.
+"""executor_node: executes in-hand repositioning plans with two arms (action ExecuteRepositioning).
 
-Not built yet: this executable is installed so that `ros2 run dmg_executor executor_node` resolves,
-and tells the caller so instead of pretending to work. Tracked in issue #8.
+Action:     execute_repositioning (dmg_interfaces/ExecuteRepositioning): a plan + alpha, or an
+            object + goal grasp (the node asks the planner, starting from the grasp it sees)
+Subscribes: arm1/endpoint_pose, arm2/endpoint_pose (geometry_msgs/PoseStamped, base frame),
+            arm1/gripper/state (dmg_interfaces/GripperState), perception/object_pose
+            (geometry_msgs/PoseWithCovarianceStamped), arm2/camera/pose, arm2/camera/camera_info
+Publishes:  arm1/cmd_vel, arm2/cmd_vel (geometry_msgs/TwistStamped, base frame),
+            arm1/gripper/command, arm2/gripper/command (dmg_interfaces/GripperCommand),
+            executor/state (dmg_interfaces/ExecutorState)
+Client:     plan_repositioning (dmg_interfaces/PlanRepositioning)
+Parameters: config/executor.yaml (topic prefixes, gains, speeds, limits, tolerances, timeouts).
+
+The control loop runs on a timer of the node's clock (simulated time with use_sim_time). One
+goal at a time; a second is rejected. Every way a run ends - done, cancelled, a fault - stops
+both arms and leaves the object gripped at the hold force.
 """
 from __future__ import annotations
 
-import argparse
-import sys
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TwistStamped
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo
+
+from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_pose
+from dmg_bringup.node_main import run_node
+from dmg_bringup.parameters import declare_from_config
+from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result
+from dmg_executor.push_points import ObjectSurface
+from dmg_executor.settings import ExecutorSettings
+from dmg_executor.views import CameraModel, TagLayout
+from dmg_interfaces.action import ExecuteRepositioning
+from dmg_interfaces.msg import ExecutorState, GripperCommand, GripperState
+from dmg_interfaces.srv import PlanRepositioning
+from dmg_planner.objects import load_object
+from dmg_planner.primitives import Primitive, PrimitiveKind
+from dmg_planner.transforms import invert
+
+
+WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
+STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state and a fresh object pose before it is refused
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="executor_node", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.parse_known_args(sys.argv[1:] if argv is None else argv)
-    print("executor_node: not available yet (the ExecuteRepositioning action server is tracked in issue #8)", file=sys.stderr)
-    return 2
+    return run_node("executor_node", __doc__, "example: executor_node --ros-args -p use_sim_time:=true",
+                    argv, ExecutorNode, lambda node: MultiThreadedExecutor(num_threads=4),
+                    startup_errors=(ValueError,))
+
+
+class GoalError(ValueError):
+    """A goal the node cannot run; carries the result code."""
+
+    def __init__(self, outcome: Outcome, message: str):
+        super().__init__(message)
+        self.outcome = outcome
+
+
+def _vector(point) -> np.ndarray:
+    return np.array([point.x, point.y, point.z], float)
+
+
+def primitives_from_message(messages) -> list[Primitive]:
+    """ManipulationPrimitive messages -> the planner core's primitives (ValueError on bad values)."""
+    primitives = []
+    for index, m in enumerate(messages):
+        if m.kind not in (PrimitiveKind.ROTATION, PrimitiveKind.TRANSLATION):
+            raise ValueError(f"primitive {index} has kind {m.kind} (0 = rotation, 1 = translation)")
+        values = [m.angle, m.finger_angle_before, m.finger_angle_after, m.opening_before, m.opening_after,
+                  *(_vector(p) for p in (m.translation, m.contact_before, m.contact_after, m.secondary_before,
+                                         m.secondary_after))]
+        if not all(np.all(np.isfinite(v)) for v in values):
+            raise ValueError(f"primitive {index} has non-finite values")
+        primitives.append(Primitive(
+            PrimitiveKind(m.kind), float(m.angle), _vector(m.translation), _vector(m.contact_before),
+            _vector(m.contact_after), float(m.finger_angle_before), float(m.finger_angle_after),
+            _vector(m.secondary_before), _vector(m.secondary_after),
+            transform_from_pose(m.gripper_after, f"primitive {index} gripper_after")))
+    return primitives
+
+
+@dataclass
+class Run:
+    goal_handle: object
+    executor: PlanExecutor
+    object_id: str
+    done: threading.Event
+    last_feedback: float = -math.inf
+    last_step: int = -1
+
+
+class ExecutorNode(Node):
+    def __init__(self) -> None:
+        super().__init__("executor")
+        values = self.values = declare_from_config(self, "executor")
+        self.settings = ExecutorSettings.from_values(values)
+        self.group = ReentrantCallbackGroup()
+        self.lock = threading.Lock()            # guards the latest messages and the current run
+        self.control_lock = threading.Lock()    # one executor step at a time (control tick or watchdog)
+        self.poses: dict[str, tuple[float, np.ndarray]] = {}    # holder, pusher, camera, object: (stamp, 4x4)
+        self.opening: tuple[float, float] | None = None          # (stamp, m)
+        self.camera_info: CameraInfo | None = None
+        self.objects: dict[str, tuple[ObjectSurface, TagLayout]] = {}
+        self.run: Run | None = None
+        self.last_message = ""
+        self.last_idle_state = -math.inf
+        self.stopping = threading.Event()
+        holder, pusher = values["holder_prefix"], values["pusher_prefix"]
+        self.roles = {"holder": holder, "pusher": pusher}
+
+        self.twist_pubs = {k: self.create_publisher(TwistStamped, f"{p}/cmd_vel", 10) for k, p in self.roles.items()}
+        self.grip_pubs = {k: self.create_publisher(GripperCommand, f"{p}/gripper/command", 10)
+                          for k, p in self.roles.items()}
+        self.state_pub = self.create_publisher(ExecutorState, "executor/state", 10)
+        for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
+                           ("camera", values["camera_pose_topic"])):
+            self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose),
+                                     50, callback_group=self.group)
+        self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"],
+                                 lambda msg: self.on_pose("object", msg.header, msg.pose.pose), 10,
+                                 callback_group=self.group)
+        self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, 10, callback_group=self.group)
+        self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data,
+                                 callback_group=self.group)
+        self.planner = self.create_client(PlanRepositioning, values["planner_service"], callback_group=self.group)
+        self.action = ActionServer(self, ExecuteRepositioning, "execute_repositioning", execute_callback=self.execute,
+                                   goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+                                   callback_group=self.group)
+        self.create_timer(1.0 / values["control_rate"], self.tick, callback_group=self.group)
+        # Wall-clock watchdog: with use_sim_time a dead simulator also stops the clock, and so the tick.
+        self.robot_heard = time.monotonic()
+        self.create_timer(WATCHDOG_PERIOD, self.watchdog, callback_group=self.group,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f"executor up: {holder} holds, {pusher} pushes; control at {values['control_rate']:g} Hz "
+                               f"on {values['object_pose_topic']}")
+
+    # --- inputs ---------------------------------------------------------------------------
+    def on_pose(self, key: str, header, pose) -> None:
+        try:
+            transform = transform_from_pose(pose, key)
+        except ValueError as error:
+            self.get_logger().error(f"{key} pose ignored: {error}", throttle_duration_sec=2.0)
+            return
+        with self.lock:
+            self.poses[key] = (seconds(header.stamp), transform)
+            if key in ("holder", "pusher"):
+                self.robot_heard = time.monotonic()
+
+    def on_gripper(self, msg: GripperState) -> None:
+        if math.isfinite(msg.opening):
+            with self.lock:
+                self.opening = (seconds(msg.header.stamp), float(msg.opening))
+
+    def on_camera_info(self, msg: CameraInfo) -> None:
+        with self.lock:
+            self.camera_info = msg
+
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # --- goals ----------------------------------------------------------------------------------
+    def on_goal(self, request) -> GoalResponse:
+        with self.lock:
+            busy = self.run is not None
+        if busy:
+            self.get_logger().warning("goal rejected: a repositioning is already running")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def execute(self, goal_handle):
+        request = goal_handle.request
+        try:
+            executor, object_id = self.prepare(request)
+        except GoalError as error:
+            self.get_logger().error(f"goal refused ({error.outcome.name}): {error}")
+            goal_handle.abort()
+            return self.result(Result(error.outcome, str(error), 0, math.nan, math.nan, 0.0))
+        run = Run(goal_handle, executor, object_id, threading.Event())
+        with self.lock:
+            self.run = run
+        self.get_logger().info(f"executing {len(executor.primitives)} primitives on '{object_id}' "
+                               f"(alpha {executor.alpha:g})")
+        while not run.done.wait(0.1):
+            if self.stopping.is_set() or not self.context.ok():
+                break
+        with self.lock:
+            self.run = None
+        result = run.executor.result or Result(Outcome.CANCELED, "executor shutting down", 0, math.nan, math.nan, 0.0)
+        self.last_message = result.message
+        summary = f"{result.outcome.name}: {result.message} ({result.duration:.1f} s)"
+        if result.outcome == Outcome.OK:   # one call site per severity: rclpy refuses to mix them
+            self.get_logger().info(summary)
+        else:
+            self.get_logger().warning(summary)
+        if result.outcome == Outcome.OK:
+            goal_handle.succeed()
+        elif result.outcome == Outcome.CANCELED and goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        return self.result(result)
+
+    @staticmethod
+    def result(result: Result) -> ExecuteRepositioning.Result:
+        return ExecuteRepositioning.Result(
+            success=result.outcome == Outcome.OK, error_code=int(result.outcome), message=result.message,
+            primitives_completed=result.primitives_completed, final_position_error=float(result.position_error),
+            final_angle_error=float(result.angle_error), execution_time=float(result.duration))
+
+    def prepare(self, request) -> tuple[PlanExecutor, str]:
+        """Validate the goal, plan if asked, and build the run's executor."""
+        alpha = float(request.alpha)
+        if not 0.0 <= alpha <= 1.0:
+            raise GoalError(Outcome.BAD_REQUEST, f"alpha {alpha} is outside [0, 1]")
+        self.wait_until(self.seen_fresh, STARTUP_WAIT)
+        if self.observation() is None:
+            raise GoalError(Outcome.ROBOT_LOST, "no gripper poses or gripper state from the robot: is the sim bridge "
+                            f"(or driver) publishing {self.roles['holder']}/endpoint_pose, "
+                            f"{self.roles['pusher']}/endpoint_pose and {self.roles['holder']}/gripper/state?")
+        if not self.seen_fresh():
+            raise GoalError(Outcome.OBJECT_LOST, f"no fresh object pose on {self.values['object_pose_topic']}: is "
+                            "perception running and the object in the camera's view?")
+        plan = request.plan
+        if not plan.primitives:
+            if not request.object_id:
+                raise GoalError(Outcome.BAD_REQUEST, "the goal has neither a plan nor an object_id + goal to plan for")
+            plan = self.ask_planner(request)
+        object_id = plan.object_id or request.object_id
+        try:
+            primitives = primitives_from_message(plan.primitives)
+        except ValueError as error:
+            raise GoalError(Outcome.BAD_REQUEST, f"bad plan: {error}") from None
+        surface, tags = self.object_geometry(object_id)
+        try:
+            executor = PlanExecutor(self.settings, surface, primitives, int(plan.principal_finger), alpha, self.now(),
+                                    self.camera_model(), tags)
+        except ValueError as error:
+            raise GoalError(Outcome.BAD_REQUEST, str(error)) from None
+        return executor, object_id
+
+    def wait_until(self, predicate, seconds: float) -> bool:
+        """Poll `predicate` (wall clock) while the subscriptions fill in, e.g. right after start-up."""
+        deadline = time.monotonic() + seconds
+        while not predicate():
+            if time.monotonic() > deadline or self.stopping.is_set():
+                return False
+            time.sleep(0.02)
+        return True
+
+    def object_geometry(self, object_id: str) -> tuple[ObjectSurface, TagLayout]:
+        if object_id not in self.objects:
+            try:
+                model = load_object(object_id)
+            except KeyError as error:
+                raise GoalError(Outcome.BAD_REQUEST, str(error.args[0])) from None
+            mesh = o3d.io.read_triangle_mesh(str(model.mesh_path))
+            scale = {"m": 1.0, "mm": 0.001}.get(model.units, 1.0)
+            if len(mesh.triangles) == 0:
+                raise GoalError(Outcome.BAD_REQUEST, f"object '{object_id}': mesh {model.mesh_path} has no triangles")
+            self.objects[object_id] = (ObjectSurface(np.asarray(mesh.vertices) * scale, np.asarray(mesh.triangles)),
+                                       TagLayout.of(model))
+        return self.objects[object_id]
+
+    def ask_planner(self, request):
+        """Plan from the grasp perception sees now to the goal (PlanRepositioning)."""
+        timeout = self.values["planner_timeout"]
+        observation = self.observation()
+        if not self.planner.wait_for_service(timeout_sec=timeout):
+            raise GoalError(Outcome.PLANNING_FAILED, f"planner service '{self.values['planner_service']}' is not "
+                            f"available (waited {timeout:g} s)")
+        start = invert(observation.object_in_holder)
+        plan_request = PlanRepositioning.Request(object_id=request.object_id, start=pose_message(start),
+                                                 start_opening=float(observation.opening), goal=request.goal,
+                                                 goal_opening=float(request.goal_opening))
+        done = threading.Event()
+        future = self.planner.call_async(plan_request)
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            raise GoalError(Outcome.PLANNING_FAILED, f"the planner did not answer within {timeout:g} s")
+        response = future.result()
+        if not response.success:
+            raise GoalError(Outcome.PLANNING_FAILED, f"planner: {response.message}")
+        return response.plan
+
+    # --- the control loop ------------------------------------------------------------------------
+    def observation(self) -> Observation | None:
+        with self.lock:
+            poses, opening = dict(self.poses), self.opening
+        if "holder" not in poses or "pusher" not in poses or opening is None:
+            return None
+        seen_time, seen = poses.get("object", (-math.inf, None))
+        return Observation(self.now(), poses["holder"][1], poses["pusher"][1], seen, seen_time, opening[1])
+
+    def seen_fresh(self) -> bool:
+        observation = self.observation()
+        return (observation is not None and observation.object_in_holder is not None
+                and observation.time - observation.object_time <= self.settings.stale_after)
+
+    def robot_age(self) -> float:
+        with self.lock:
+            stamps = [self.poses[k][0] for k in ("holder", "pusher") if k in self.poses]
+            stamps.append(self.opening[0] if self.opening else -math.inf)
+        return self.now() - min(stamps) if len(stamps) == 3 else math.inf
+
+    def camera_model(self) -> CameraModel | None:
+        with self.lock:
+            info, poses = self.camera_info, dict(self.poses)
+        if info is None or "camera" not in poses or "pusher" not in poses or info.k[0] <= 0:
+            self.get_logger().warning("no camera model yet (camera_info and camera pose): the pusher keeps its "
+                                      "orientation instead of keeping the tags in view")
+            return None
+        return CameraModel(np.asarray(info.k, float).reshape(3, 3), int(info.width), int(info.height),
+                           invert(poses["pusher"][1]) @ poses["camera"][1])
+
+    def watchdog(self) -> None:
+        """Wall clock: idle state messages, and a run stopped when the robot falls silent."""
+        with self.lock:
+            run, silent = self.run, time.monotonic() - self.robot_heard
+        if run is None:
+            self.publish_idle_state()
+        elif silent > self.settings.robot_timeout:
+            with self.control_lock:
+                if not run.executor.done:
+                    self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
+                                                        f"{silent:.1f} s (wall clock): stopped"))
+
+    def tick(self) -> None:
+        with self.lock:
+            run = self.run
+        if run is None:
+            return
+        with self.control_lock:    # the wall-clock watchdog may end the run at the same time
+            executor = run.executor
+            if executor.done:
+                return
+            if run.goal_handle.is_cancel_requested:
+                command = executor.cancel()
+            elif self.robot_age() > self.settings.robot_timeout:
+                command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
+                                         f"{self.robot_age():.2f} s: stopped")
+            else:
+                command = executor.update(self.observation())
+            self.finish(run, command)
+
+    def finish(self, run: Run, command: Command) -> None:
+        """Send a tick's command and progress; when the run has ended, stop and hold once more."""
+        executor = run.executor
+        self.publish_command(command)
+        self.publish_progress(run)
+        if executor.done:
+            self.publish_command(Command(holder_grip=command.holder_grip))
+            run.done.set()
+
+    def publish_command(self, command: Command) -> None:
+        stamp = self.get_clock().now().to_msg()
+        for key, twist in (("holder", command.holder), ("pusher", command.pusher)):
+            msg = TwistStamped()
+            msg.header.stamp, msg.header.frame_id = stamp, self.values["base_frame"]
+            msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(v) for v in twist[:3])
+            msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = (float(v) for v in twist[3:])
+            self.twist_pubs[key].publish(msg)
+        for key, grip in (("holder", command.holder_grip), ("pusher", command.pusher_grip)):
+            if grip is not None:
+                msg = GripperCommand(opening=float(grip.opening), max_force=float(grip.max_force))
+                msg.header.stamp = stamp
+                self.grip_pubs[key].publish(msg)
+
+    def publish_progress(self, run: Run) -> None:
+        progress = run.executor.progress()
+        now = self.now()
+        if now - run.last_feedback >= 1.0 / self.values["state_rate"] or int(progress.step) != run.last_step:
+            run.last_feedback, run.last_step = now, int(progress.step)
+            run.goal_handle.publish_feedback(ExecuteRepositioning.Feedback(
+                primitive_index=progress.primitive_index, primitive_count=progress.primitive_count,
+                step=int(progress.step), contact_error=float(progress.contact_error),
+                angle_error=float(progress.angle_error)))
+        primitive = run.executor.primitives[progress.primitive_index] if run.executor.primitives else None
+        result = run.executor.result
+        self.publish_state(ExecutorState(
+            active=result is None, object_id=run.object_id, primitive_index=progress.primitive_index,
+            primitive_count=progress.primitive_count, kind=int(primitive.kind) if primitive else 0,
+            step=int(progress.step), step_name=progress.step.name, contact_error=float(progress.contact_error),
+            angle_error=float(progress.angle_error), alpha=run.executor.alpha,
+            message=result.message if result else "; ".join(run.executor.notes)))
+
+    def publish_idle_state(self) -> None:
+        now = time.monotonic()
+        if now - self.last_idle_state >= 1.0 / self.values["state_rate"]:
+            self.last_idle_state = now
+            self.publish_state(ExecutorState(active=False, step_name="IDLE", contact_error=math.nan,
+                                             angle_error=math.nan, message=self.last_message))
+
+    def publish_state(self, msg: ExecutorState) -> None:
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.state_pub.publish(msg)
+
+    def shutdown(self) -> None:
+        self.stopping.set()
+        with self.lock:
+            run = self.run
+        if run is not None and self.context.ok():
+            with self.control_lock:
+                self.publish_command(run.executor.cancel("executor_node shutting down"))

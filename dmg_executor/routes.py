@@ -15,7 +15,7 @@ from itertools import product
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
 
-ESCAPE_DEPTH = 0.02   # m; a start deeper inside the box than this is a fault, not a leftover
+ESCAPE_DEPTH = 0.035  # m (pusher touching the object: about 20 mm); a start deeper inside the box than this is a fault, not a leftover
 FAR_SIDE_COST = 5.0   # routes behind the object (seen from the preferred side) cost this much more
 PALM_REACH = 0.3   # m beyond the fingertips towards the palm that count as gripper and arm
 
@@ -49,6 +49,16 @@ class KeepOut:
         enter, leave = t_near.max(axis=1), t_far.min(axis=1)
         return (enter < leave - 1e-9) & (leave > 1e-9) & (enter < 1 - 1e-9)
 
+    def nearest_outside(self, point: np.ndarray, margin: float = 0.002) -> np.ndarray:
+        """`point` if it is outside, else the nearest point just outside a face."""
+        if not self.contains(point)[0]:
+            return point
+        gaps = np.concatenate([point - self.low, self.high - point])
+        nearest = int(np.argmin(gaps))
+        moved = point.copy()
+        moved[nearest % 3] = self.low[nearest % 3] - margin if nearest < 3 else self.high[nearest % 3] + margin
+        return moved
+
     def exit_distance(self, point: np.ndarray, direction: np.ndarray) -> float:
         """How far from `point` (inside) along `direction` the box ends."""
         with np.errstate(divide="ignore"):
@@ -80,13 +90,11 @@ def route(start: np.ndarray, goal: np.ndarray, box: KeepOut, prefer: np.ndarray 
                          "kept free around the object and the holding gripper")
     escape = []
     if box.contains(start)[0]:
-        gaps = np.concatenate([start - box.low, box.high - start])
-        nearest = int(np.argmin(gaps))
-        if gaps[nearest] > ESCAPE_DEPTH:
+        depth = float(np.min(np.concatenate([start - box.low, box.high - start])))
+        if depth > ESCAPE_DEPTH:
             raise RouteError(f"the pusher at {np.round(start * 1000, 1).tolist()} mm is "
-                             f"{gaps[nearest] * 1000:.0f} mm inside the space kept free around the object")
-        start = start.copy()
-        start[nearest % 3] = box.low[nearest % 3] - margin if nearest < 3 else box.high[nearest % 3] + margin
+                             f"{depth * 1000:.0f} mm inside the space kept free around the object")
+        start = box.nearest_outside(start, margin)
         escape = [start]
     low, high = box.low - margin, box.high + margin
     middle = (low + high) / 2

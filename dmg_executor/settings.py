@@ -45,6 +45,7 @@ class ExecutorSettings:
     waypoint_tolerance: float
     stale_after: float
     stale_after_held: float
+    robot_timeout: float
     slip_distance: float
     slip_angle: float              # rad
     step_timeout: float

@@ -20,7 +20,7 @@ from dmg_perception.tags import tag_corners, tag_pose
 from dmg_planner.objects import ObjectModel
 
 GRID_STEP = np.deg2rad(7.5)
-EDGE_MARGIN = 12.0                   # px a tag corner must keep from the image border
+EDGE_MARGIN = 30.0                   # px a tag corner must keep from the image border (the pose is only planned)
 FACING_COSINE = np.cos(np.deg2rad(70.0))   # a tag seen more edge-on than this is not counted
 LEVEL_SINE = np.sin(np.deg2rad(15.0))   # fingertip axis across a push line: at most this far off
 NEAREST = 0.04                       # m; closer to the camera than this is not in view

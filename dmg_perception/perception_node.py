@@ -36,6 +36,8 @@ from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState
 from dmg_planner.objects import load_object, object_names
 
+POSE_WAIT = 0.1   # s (wall) an image waits for the camera and gripper poses of its time stamp
+
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("perception_node", __doc__, "example: perception_node --ros-args -p object:=box -p debug_image:=true",
@@ -127,9 +129,21 @@ class PerceptionNode(Node):
             self.counts["bad_images"] += 1
             self.get_logger().error(f"image skipped: {error}", throttle_duration_sec=2.0)
             return
+        stamp = seconds(msg.header.stamp)
+        self.wait_for_poses(stamp)
         with self.lock:
-            result = self.tracker.process(seconds(msg.header.stamp), grey, self.now())
+            result = self.tracker.process(stamp, grey, self.now())
         self.publish_result(msg, result, grey)
+
+    def wait_for_poses(self, stamp: float) -> None:
+        """Poses sent with an image can arrive after it (a busy machine): wait for them a little."""
+        deadline = time.monotonic() + POSE_WAIT
+        while time.monotonic() < deadline and not self.stopping.is_set():
+            with self.lock:
+                newest = [buffer.latest_time for buffer in (self.tracker.camera_poses, self.tracker.gripper_poses)]
+            if all(t is not None and t >= stamp for t in newest):
+                return
+            time.sleep(0.005)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9

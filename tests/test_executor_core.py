@@ -76,3 +76,143 @@ def test_push_points_that_do_not_exist_are_refused(box_surface):
         translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0])
     with pytest.raises(PushError, match="not a rotation"):
         rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [-1, 0, 0], 0.0, depth=0.03, inset=0.005)
+
+
+# --- routes round the object -------------------------------------------------------------------
+def test_routes_go_round_the_keep_out_box_and_prefer_the_near_side():
+    from dmg_executor.routes import KeepOut, RouteError, route
+
+    box = KeepOut(np.array([-0.05, -0.05, -0.3]), np.array([0.05, 0.05, 0.08]))
+    start, goal = np.array([0.0, 0.2, 0.0]), np.array([0.0, -0.2, 0.0])    # opposite sides
+    path = [start] + route(start, goal, box)
+    assert np.allclose(path[-1], goal)
+    starts, ends = np.array(path[:-1]), np.array(path[1:])
+    assert not box.crosses(starts, ends).any()            # no stretch passes through the box
+    assert box.crosses(start[None], goal[None])[0]         # while the straight line would
+    # Both ways round (over +x or -x) are as long; preferring +x takes the +x side.
+    preferred = route(start, goal, box, prefer=np.array([0.5, 0.0, 0.0]))
+    assert all(p[0] > -0.05 for p in preferred)
+    # A start just inside leaves through the nearest face first; a goal inside is refused.
+    inside = np.array([0.0, 0.04, 0.0])
+    assert route(inside, goal, box)[0][1] > 0.05
+    with pytest.raises(RouteError, match="goal"):
+        route(start, np.zeros(3), box)
+
+
+def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_would_not():
+    from dmg_executor.views import CameraModel, TagLayout, best_orientation, turns, view_score
+    from dmg_planner.objects import load_object
+
+    # Camera 85 mm behind and 38 mm beside the fingertips, looking along them (the sim's hand camera).
+    in_pusher = np.eye(4)
+    in_pusher[:3, 3] = [0.038, 0.012, -0.085]
+    camera = CameraModel(np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]]), 640, 480, in_pusher)
+    tags = TagLayout.of(load_object("box"))
+    # The box stands on end (its x up), tags (+-z faces) towards -y; the pusher's fingers point +y.
+    object_pose = np.eye(4)
+    object_pose[:3, :3] = np.column_stack([[0, 0, 1], [1, 0, 0], [0, -1, 0]])
+    home = np.column_stack([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).astype(float)
+    below = np.array([0.0, 0.0, -0.065])                  # under the box, where a push upwards starts
+    seen_home, _ = view_score(camera, tags, object_pose, below, home[None])
+    orientation, seen = best_orientation(camera, tags, object_pose, below, home, turns(np.deg2rad(30), np.deg2rad(90)))
+    assert seen_home[0] == 0 and seen >= 1
+    tilt = np.rad2deg(np.arccos(np.clip(orientation[:, 2] @ home[:, 2], -1, 1)))
+    assert 0 < tilt <= 30 + 1e-6                          # it had to turn the fingers, within the limit
+
+
+# --- the whole loop in one process: real MuJoCo, real rendering and tag detection --------------
+@pytest.fixture(scope="module")
+def loop_parts():
+    from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_executor.views import TagLayout
+    from dmg_perception.estimator import ObjectPoseEstimator
+    from dmg_planner.graph import GraphParameters, build_graph
+    from dmg_planner.objects import load_object
+    from dmg_sim_bridge.cell import Cell
+
+    model = load_object("box")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+    cell = Cell()
+    yield cell, ClosedLoop(cell, ObjectPoseEstimator([model])), graph, TagLayout.of(model)
+    cell.close()
+
+
+def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import Outcome, PlanExecutor
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, graph, tags = loop_parts
+    start = invert(cell.reset("box").object_in_gripper)
+    goal = start.copy()
+    goal[:3, 3] += 0.015 * start[:3, 2]
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    result = plan(graph, pose(start), pose(goal))
+    assert [p.kind.name for p in result.primitives] == ["TRANSLATION"]
+    holder_before, pusher_positions = cell.grasp_pose("arm1")[:3, 3], []
+    executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, result.primitives, result.principal_finger,
+                            0.0, cell.time, loop.camera_model(), tags)
+    original_update = executor.update
+
+    def recording_update(observation):
+        command = original_update(observation)
+        if executor.step.name == "EXECUTE":
+            pusher_positions.append(observation.pusher[:3, 3])
+        return command
+
+    executor.update = recording_update
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert distance(invert(cell.object_in_gripper("arm1")), result.primitives[-1].gripper_after)[0] < 0.003
+    assert np.ptp(np.array(pusher_positions), axis=0).max() < 0.002     # the pusher held still while pushing
+    assert np.linalg.norm(cell.grasp_pose("arm1")[:3, 3] - holder_before) > 0.005   # the holder did the moving
+
+
+def _translation_executor(loop_parts, box_surface, **overrides):
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import invert
+
+    cell, loop, graph, tags = loop_parts
+    start = invert(cell.reset("box").object_in_gripper)
+    goal = start.copy()
+    goal[:3, 3] += 0.015 * start[:3, 2]
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    result = plan(graph, pose(start), pose(goal))
+    return PlanExecutor(ExecutorSettings.defaults(**overrides), box_surface, result.primitives,
+                        result.principal_finger, 1.0, cell.time, loop.camera_model(), tags)
+
+
+def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    # A workspace that holds both grippers where they are, but not the space under the object.
+    executor = _translation_executor(loop_parts, box_surface, workspace_min=[0.3, -0.5, 0.12])
+    pusher_before = cell.grasp_pose("arm2")[:3, 3]
+    outcome = loop.run(executor, time_limit=30)
+    assert outcome.outcome == Outcome.LIMIT_VIOLATION and "outside the workspace" in outcome.message
+    assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - pusher_before) < 0.002
+    assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
+
+
+def test_an_object_slipping_in_the_closed_grip_aborts_with_slip_and_the_grip_closes(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    for _ in range(50):                         # the run starts: the pusher sets off
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    cell.command_gripper("arm1", 0.0, 0.3)      # fault: gripper 1 goes weak, the box slides out by its weight
+    outcome = loop.run(executor, time_limit=30)
+    assert outcome.outcome == Outcome.SLIP and "moved" in outcome.message
+    assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)   # the executor closed the grip again

@@ -86,7 +86,7 @@ def test_object_pose_in_the_gripper_matches_ground_truth(cell):
     assert moved < 0.0015 and np.rad2deg(turned) < 1.0
     covariance = np.array(pose.pose.covariance).reshape(6, 6)
     assert np.all(np.linalg.eigvalsh((covariance + covariance.T) / 2) > 0)
-    status = watcher.wait_for(lambda: (s := watcher.latest["/perception/status"]).state == s.TRACKING and s,
+    status = watcher.wait_for(lambda: (s := watcher.latest.get("/perception/status")) and s.state == s.TRACKING and s,
                               what="TRACKING status")
     assert status.object_id == "box" and status.tags_used == 2 and status.reprojection_error < 0.5
     detections = watcher.latest["/perception/detections"].detections
