@@ -216,3 +216,15 @@ def test_an_object_slipping_in_the_closed_grip_aborts_with_slip_and_the_grip_clo
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.SLIP and "moved" in outcome.message
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)   # the executor closed the grip again
+
+
+def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, step_timeout=0.5)   # the approach needs seconds
+    outcome = loop.run(executor, time_limit=30)
+    assert outcome.outcome == Outcome.STEP_TIMEOUT and "APPROACH" in outcome.message
+    assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
+    cell.run(0.3)                                   # the arms' watchdog has stopped them
+    assert np.abs(cell.joint_state().velocity).max() < 0.01
