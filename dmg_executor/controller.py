@@ -226,9 +226,10 @@ class PlanExecutor:
             Step.LEAVE: self._leave}[self.step]
         return handler(obs)
 
-    def _enter(self, step: Step, obs: Observation, held: bool = True) -> None:
+    def _enter(self, step: Step, obs: Observation) -> None:
+        """Start a step with the grip closed: from here the object must not move in it."""
         self.step, self.step_started = step, obs.time
-        self.held_reference = obs.object_in_holder.copy() if held else None
+        self.held_reference = obs.object_in_holder.copy()
 
     def _find_contact(self, obs: Observation) -> Command:
         while self.index < len(self.primitives) and self._primitive_finished():
