@@ -138,41 +138,8 @@ def loop_parts():
     cell.close()
 
 
-def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
-    from scipy.spatial.transform import Rotation
-
-    from dmg_executor.controller import Outcome, PlanExecutor
-    from dmg_executor.settings import ExecutorSettings
-    from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import distance, invert
-
-    cell, loop, graph, tags = loop_parts
-    start = invert(cell.reset("box").object_in_gripper)
-    goal = start.copy()
-    goal[:3, 3] += 0.015 * start[:3, 2]
-    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
-    result = plan(graph, pose(start), pose(goal))
-    assert [p.kind.name for p in result.primitives] == ["TRANSLATION"]
-    holder_before, pusher_positions = cell.grasp_pose("arm1")[:3, 3], []
-    executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, result.primitives, result.principal_finger,
-                            0.0, cell.time, loop.camera_model(), tags)
-    original_update = executor.update
-
-    def recording_update(observation):
-        command = original_update(observation)
-        if executor.step.name == "EXECUTE":
-            pusher_positions.append(observation.pusher[:3, 3])
-        return command
-
-    executor.update = recording_update
-    outcome = loop.run(executor, time_limit=120)
-    assert outcome.outcome == Outcome.OK, outcome.message
-    assert distance(invert(cell.object_in_gripper("arm1")), result.primitives[-1].gripper_after)[0] < 0.003
-    assert np.ptp(np.array(pusher_positions), axis=0).max() < 0.002     # the pusher held still while pushing
-    assert np.linalg.norm(cell.grasp_pose("arm1")[:3, 3] - holder_before) > 0.005   # the holder did the moving
-
-
-def _translation_executor(loop_parts, box_surface, **overrides):
+def _translation_executor(loop_parts, box_surface, alpha: float = 1.0, **overrides):
+    """An executor for a 15 mm translation of the box's default grasp along the fingers, freshly reset."""
     from scipy.spatial.transform import Rotation
 
     from dmg_executor.controller import PlanExecutor
@@ -187,7 +154,31 @@ def _translation_executor(loop_parts, box_surface, **overrides):
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
     result = plan(graph, pose(start), pose(goal))
     return PlanExecutor(ExecutorSettings.defaults(**overrides), box_surface, result.primitives,
-                        result.principal_finger, 1.0, cell.time, loop.camera_model(), tags)
+                        result.principal_finger, alpha, cell.time, loop.camera_model(), tags)
+
+
+def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, alpha=0.0)
+    assert [p.kind.name for p in executor.primitives] == ["TRANSLATION"]
+    holder_before, pusher_positions = cell.grasp_pose("arm1")[:3, 3], []
+    original_update = executor.update
+
+    def recording_update(observation):
+        command = original_update(observation)
+        if executor.step.name == "EXECUTE":
+            pusher_positions.append(observation.pusher[:3, 3])
+        return command
+
+    executor.update = recording_update
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+    assert np.ptp(np.array(pusher_positions), axis=0).max() < 0.002     # the pusher held still while pushing
+    assert np.linalg.norm(cell.grasp_pose("arm1")[:3, 3] - holder_before) > 0.005   # the holder did the moving
 
 
 def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_parts, box_surface):
