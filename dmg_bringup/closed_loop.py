@@ -38,7 +38,6 @@ class ClosedLoop:
         self.cell, self.estimator = cell, estimator
         self.control_period, self.camera_period = 1.0 / control_rate, 1.0 / camera_rate
         estimator.set_camera(cell.config.camera.intrinsic_matrix())
-        self.camera_covered = False
         self.seen: np.ndarray | None = None
         self.seen_time = -math.inf
         self.next_frame = -math.inf
@@ -49,10 +48,7 @@ class ClosedLoop:
         if cell.time + 1e-9 < self.next_frame:
             return
         self.next_frame = cell.time + self.camera_period
-        image = cell.render()
-        if self.camera_covered:
-            image = np.zeros_like(image)
-        grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+        grey = cv2.cvtColor(cell.render(), cv2.COLOR_RGB2GRAY)
         holder_from_camera = invert(cell.grasp_pose("arm1")) @ cell.camera_pose()
         estimate = self.estimator.estimate(self.estimator.detect(grey), holder_from_camera, cell.object.name)
         if estimate is not None:

@@ -34,7 +34,7 @@ from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, TagLayout, best_orientation, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
-from dmg_planner.transforms import distance, invert
+from dmg_planner.transforms import apply, distance, invert
 
 MAX_PUSHES_PER_PRIMITIVE = 4
 MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
@@ -132,6 +132,11 @@ class _Push:
 def _rotation_about_axis(rotation: np.ndarray) -> float:
     """Angle [rad] of a rotation (holder frame) about the grasp axis x."""
     return float(Rotation.from_matrix(rotation).as_rotvec()[0])
+
+
+def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
+    """How far [rad] the object turned about the grasp axis from pose `reference` to `now` (holder frame)."""
+    return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
 
 
 def _shift(twist: np.ndarray, from_point: np.ndarray, to_point: np.ndarray) -> np.ndarray:
@@ -345,15 +350,15 @@ class PlanExecutor:
         s = self.settings
         holder = obs.holder
         object_pose = holder @ obs.object_in_holder
-        point = object_pose[:3, :3] @ push.point + object_pose[:3, 3]
+        point = apply(object_pose, push.point)
         direction = object_pose[:3, :3] @ push.direction
         box = self._keep_out(obs)
         to_holder = invert(holder)
-        point_h = to_holder[:3, :3] @ point + to_holder[:3, 3]
+        point_h = apply(to_holder, point)
         direction_h = to_holder[:3, :3] @ direction
         outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
-        pusher_h = to_holder[:3, :3] @ obs.pusher[:3, 3] + to_holder[:3, 3]
-        waypoints = [holder[:3, :3] @ w + holder[:3, 3] for w in route(pusher_h, outside_h, box, self._home_in(holder))]
+        pusher_h = apply(to_holder, obs.pusher[:3, 3])
+        waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         # Where the push starts, the tips must not be spread across the push line.
         across = np.cross(direction, holder[:3, 0])
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
@@ -374,7 +379,7 @@ class PlanExecutor:
 
     def _home_in(self, holder: np.ndarray) -> np.ndarray:
         """Where the pusher started (its camera's vantage point), in the holder's frame."""
-        return invert(holder)[:3, :3] @ self.pusher_home[:3, 3] + invert(holder)[:3, 3]
+        return apply(invert(holder), self.pusher_home[:3, 3])
 
     def _reach(self, direction: np.ndarray, orientation: np.ndarray) -> float:
         """How far the closed fingertips reach from the pusher's grasp frame along `direction`."""
@@ -420,7 +425,7 @@ class PlanExecutor:
             relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across, np.zeros(3)])
         else:
             turn = self.errors[1]
-            turned = _rotation_about_axis(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T)
+            turned = _turned_since(self.pushed_reference, obs.object_in_holder)
             budget = float(np.clip(turn + turned, -s.max_push_angle, s.max_push_angle))   # this push's share
             left = budget - turned
             if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
@@ -448,13 +453,13 @@ class PlanExecutor:
     def _leave(self, obs: Observation) -> Command:
         if self.retreat is None:
             # Back out along the push line as the object now lies (a rotation turned it with the pusher).
-            turned = _rotation_about_axis(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T)
+            turned = _turned_since(self.pushed_reference, obs.object_in_holder)
             local = Rotation.from_rotvec([turned, 0.0, 0.0]).apply(self.push.local_direction)
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
-            pusher = to_holder[:3, :3] @ obs.pusher[:3, 3] + to_holder[:3, 3]
+            pusher = apply(to_holder, obs.pusher[:3, 3])
             out = pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local
-            self.retreat = obs.holder[:3, :3] @ out + obs.holder[:3, 3]
+            self.retreat = apply(obs.holder, out)
         if np.linalg.norm(self.retreat - obs.pusher[:3, 3]) < self.settings.waypoint_tolerance:
             self.retreat = None
             self._enter(Step.FIND_CONTACT, obs)
@@ -474,13 +479,13 @@ class PlanExecutor:
             self.held_reference = obs.object_in_holder.copy()
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
-            local = [to_holder[:3, :3] @ p + to_holder[:3, 3] for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+            local = [apply(to_holder, p) for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
             local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
             try:
                 waypoints = route(local[0], local[1], box, local[1])
             except RouteError as error:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"cannot return the pusher: {error}")
-            places = [obs.holder[:3, :3] @ w + obs.holder[:3, 3] for w in waypoints]
+            places = [apply(obs.holder, w) for w in waypoints]
             orientations = [self._view(obs, place)[0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
             self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
             self.waypoint = 0
@@ -546,7 +551,7 @@ class PlanExecutor:
     def _remaining_motion(self, obs: Observation) -> np.ndarray:
         """Object displacement (holder frame) still needed, across the grasp axis only."""
         goal_middle = self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after[:3, 3]
-        where = obs.object_in_holder[:3, :3] @ goal_middle + obs.object_in_holder[:3, 3]
+        where = apply(obs.object_in_holder, goal_middle)
         motion = -where
         motion[0] = 0.0       # along the grasp axis the fingers centre the object
         return motion
@@ -566,7 +571,7 @@ class PlanExecutor:
         last = self.primitives[-1]
         side = -1.0 if self.principal_finger == 0 else 1.0
         holder_in_object = invert(obs.object_in_holder)
-        contact = holder_in_object[:3, :3] @ np.array([side * obs.opening / 2, 0.0, 0.0]) + holder_in_object[:3, 3]
+        contact = apply(holder_in_object, [side * obs.opening / 2, 0.0, 0.0])
         return float(np.linalg.norm(contact - last.contact_after)), distance(holder_in_object, last.gripper_after)[1]
 
     def _limits(self, obs: Observation) -> tuple[Outcome, str] | None:

@@ -28,6 +28,11 @@ def position_quaternion(transform: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return transform[:3, 3].copy(), Rotation.from_matrix(transform[:3, :3]).as_quat()
 
 
+def apply(transform: np.ndarray, points) -> np.ndarray:
+    """Points (3,) or (n, 3) mapped by a 4x4 transform."""
+    return np.asarray(points, float) @ transform[:3, :3].T + transform[:3, 3]
+
+
 def invert(transform: np.ndarray) -> np.ndarray:
     inverse = np.eye(4)
     inverse[:3, :3] = transform[:3, :3].T

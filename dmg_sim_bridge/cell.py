@@ -32,6 +32,7 @@ IK_TOLERANCE = (1e-4, 1e-3)   # m, rad
 IK_WRIST_SEEDS = (0.0, np.pi / 2, -np.pi / 2)   # last-joint offsets tried from ik_seed: the IK can end on a limit
 IK_STEP = (0.05, 0.2)         # largest task-space step per iteration: m, rad
 IK_CENTRING_GAIN = 0.1        # share of the distance to mid-range moved per iteration, in the null space
+NULLSPACE_RCOND = 1e-6    # singular values below this share of the largest count as zero (as pinv's rcond)
 OPTICAL_FROM_MUJOCO = Rotation.from_euler("x", np.pi).as_matrix()
 
 
@@ -94,7 +95,12 @@ def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float
     Damping grows from 0 as the smallest singular value falls below `threshold` (Maciejewski &
     Klein), so tracking is exact in the workspace and joint speeds stay bounded at its edges.
     """
-    u, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+    return _damped_solve(np.linalg.svd(jacobian, full_matrices=False), twist, damping, threshold)
+
+
+def _damped_solve(svd, twist: np.ndarray, damping: float, threshold: float) -> np.ndarray:
+    """damped_least_squares from a Jacobian's thin SVD (u, singular values, vt)."""
+    u, singular, vt = svd
     smallest = singular[-1]
     lam2 = damping**2 * (1 - (smallest / threshold) ** 2) if smallest < threshold else 0.0
     return vt.T @ ((singular / (singular**2 + lam2)) * (u.T @ twist))
@@ -243,11 +249,11 @@ class Cell:
         free = np.ones(len(arm.dofs), bool)
         for _ in range(len(arm.dofs)):
             velocity = np.zeros(len(arm.dofs))
-            velocity[free] = damped_least_squares(columns[:, free], twist, control.dls_damping,
-                                                  control.singular_threshold)
+            svd = np.linalg.svd(columns[:, free], full_matrices=False)   # one SVD for the task and its null space
+            velocity[free] = _damped_solve(svd, twist, control.dls_damping, control.singular_threshold)
             if arm.posture is not None:
-                task = columns[:, free]
-                nullspace = np.eye(task.shape[1]) - np.linalg.pinv(task) @ task
+                rows = svd[2][svd[1] > NULLSPACE_RCOND * svd[1][0]]
+                nullspace = np.eye(rows.shape[1]) - rows.T @ rows
                 velocity[free] += control.posture_gain * nullspace @ (arm.posture - reference)[free]
             blocked = ((reference <= arm.lower + control.joint_limit_margin) & (velocity < 0)) | (
                 (reference >= arm.upper - control.joint_limit_margin) & (velocity > 0))
