@@ -18,7 +18,7 @@ import rclpy
 import yaml
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 from rosbags.typesys.store import Typestore
 
@@ -79,7 +79,10 @@ def record(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, request_stop)
     signal.signal(signal.SIGINT, request_stop)
-    with cli_node("dmg_bag_record") as node, Writer(output, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
+    if args.compression == "zstd":
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)   # MCAP chunk compression
+    with cli_node("dmg_bag_record") as node, writer:
         connections: dict[str, object] = {}
         counts: dict[str, int] = {}
         subscriptions = []
@@ -243,6 +246,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-a", "--all", action="store_true", help="record every topic (but /rosout, /parameter_events)")
     p.add_argument("-o", "--output", required=True, help="new bag directory")
     p.add_argument("--max-duration", type=float, help="stop after this many seconds")
+    p.add_argument("--compression", choices=("zstd", "none"), default="zstd",
+                   help="zstd-compressed MCAP chunks (default; camera images shrink ~15x) or none")
     p.set_defaults(handler=record)
     p = verbs.add_parser("info", help="summarise a bag")
     p.add_argument("bag")

@@ -9,7 +9,8 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import bag, demo, graph_cli, launcher, perception_bench, planner_bench, ros_verbs, sim_bench
+from dmg_bringup import (bag, demo, evaluation, graph_cli, launcher, monitor, perception_bench, planner_bench, ros_verbs,
+                          sim_bench)
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -41,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     launcher.register(subparsers)
     graph_cli.register(subparsers)
     demo.register(subparsers)
+    monitor.register(subparsers)
+    evaluation.register(subparsers)
     bench = subparsers.add_parser("bench", help="benchmarks of the ROS nodes (the DMG core: `dmg graph bench`)")
     verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
     planner_bench.register(verbs)

@@ -42,6 +42,15 @@ class ClosedLoop:
         self.seen_time = -math.inf
         self.next_frame = -math.inf
 
+    def watch(self, seconds: float) -> None:
+        """Forget earlier sightings (a reset moved the object), then let the cell run, arms still,
+        perceiving as it goes."""
+        self.seen, self.seen_time, self.next_frame = None, -math.inf, -math.inf
+        ends = self.cell.time + seconds
+        while self.cell.time < ends:
+            self.perceive()
+            self.cell.run(self.control_period)
+
     def perceive(self) -> None:
         """Render and estimate when a camera frame is due."""
         cell = self.cell

@@ -1,91 +1,212 @@
-"""`dmg demo`: the main job on the shipped defaults.
+"""`dmg demo`: the main job. The whole simulated cell repositions an object in the gripper.
 
-Until the whole simulated cell exists (issues 5-9), this runs the most complete part that
-does: for every shipped object it builds the Dexterous Manipulation Graph (or loads it from
-the cache), computes the manipulability matrix, plans an in-hand repositioning between the
-two distant poses of the matrix's largest block
-(fingers turned by at least 90 degrees), prints the primitives, and writes
-pictures and a JSON summary under the output directory.
+Brings up the cell (config/launch/cell.yaml: sim bridge, perception, planner, executor on
+sim time) and a bag recorder, puts the object in gripper 1, asks the planner for a plan
+from the perceived grasp to a goal that needs rotations and translations (turned about the
+grasp axis and moved along the fingers), executes it, prints a line per primitive and a
+summary judged against the simulator's ground truth, stops everything, then draws the
+pictures from the bag. Defaults: config/demo.yaml.
+
+Writes under --output: summary.json, bag/ (rosbag2, MCAP), cell.log (every node's log),
+camera.mp4, dmg.png (the DMG with planned and executed contact paths), errors.png,
+manipulability.png, camera_frames.png.
 """
 from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
+import math
+import shutil
+import sys
+import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 from scipy.spatial.transform import Rotation
 
-from dmg_bringup.graph_cli import plan_summary, print_plan
-from dmg_planner.graph_parameters import GraphParameters
+from dmg_bringup.environment import apply_ros_environment, config_dir
 from dmg_planner.objects import object_names
 
 
-def _demo_pair(result) -> tuple[int, int]:
-    """Two poses of the largest block, as far apart as possible with the fingers turned by
-    at least 90 degrees (so the plan needs translations and rotations)."""
-    largest = np.argmax(result.block_sizes)
-    members = np.flatnonzero(result.blocks == largest)
-    points = result.positions[members]
-    fingers = result.rotations[members][:, :, 2]
-    distance = np.linalg.norm(points[:, None] - points[None], axis=-1)
-    turned = fingers @ fingers.T <= 1e-9
-    score = np.where(turned, distance, distance - 1.0) if turned.any() else distance
-    i, j = np.unravel_index(np.argmax(score), score.shape)
-    return int(members[i]), int(members[j])
+@dataclass
+class DemoSettings:
+    object: str
+    turn_deg: float
+    shift: float
+    alpha: float
+    launch: str
+    ready_timeout: float
+    run_timeout: float
+    camera_video_every: int
+    output: str
+
+    @classmethod
+    def load(cls, overrides: dict) -> DemoSettings:
+        values = yaml.safe_load((config_dir() / "demo.yaml").read_text())
+        values.update({k: v for k, v in overrides.items() if v is not None and k in cls.__dataclass_fields__})
+        return cls(**values)
+
+
+def goal_grasp(start: np.ndarray, turn_deg: float, shift: float) -> np.ndarray:
+    """The start grasp turned about its own grasp axis (x) and moved along its fingers (z)."""
+    goal = start.copy()
+    goal[:3, :3] = Rotation.from_rotvec(np.deg2rad(turn_deg) * start[:3, 0]).as_matrix() @ start[:3, :3]
+    goal[:3, 3] += shift * goal[:3, 2]
+    return goal
+
+
+def _describe(primitive) -> str:
+    if primitive.kind == 0:
+        return f"rotation {math.degrees(primitive.angle):+.1f} deg"
+    t = primitive.translation
+    return f"translation {math.hypot(t.x, t.y, t.z) * 1000:.1f} mm"
+
+
+def _points(points) -> np.ndarray:
+    return np.array([[p.x, p.y, p.z] for p in points])
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from dmg_planner.manipulability import manipulability_matrix, save_matrix
-    from dmg_planner.pictures import draw_graph
-    from dmg_planner.library import ObjectLibrary
-    from dmg_planner.search import GripperPose, SearchOptions, plan
+    from dmg_bringup.launcher import Launcher, NodeSpec, load_launch_file
 
-    output = Path(args.output)
+    apply_ros_environment()   # node executables resolve through the ament index
+    settings = DemoSettings.load(vars(args))
+    if settings.object not in object_names():
+        print(f"dmg demo: error: unknown object '{settings.object}' (shipped: {', '.join(object_names())})",
+              file=sys.stderr)
+        return 2
+    output = Path(settings.output)
     output.mkdir(parents=True, exist_ok=True)
-    # The planner's own object handling: the objects' seed resolutions, the graph cache.
-    library = ObjectLibrary(replace(GraphParameters(), seed_resolution=0.0), SearchOptions(), args.cache_dir or None)
-    summary = {}
-    for name in args.objects or object_names():
-        loaded = library.load_config_object(name, wait=True)
-        if loaded.entry is None or loaded.entry.graph is None:
-            print(f"\n== {name}: {loaded.message}")
-            return 1
-        graph, seconds = loaded.entry.graph, loaded.entry.build_time
-        source = "cache" if loaded.entry.from_cache else "built"
-        stats = graph.statistics()
-        print(f"\n== {name}: graph {source} in {seconds * 1000:.0f} ms: {stats['supervoxels']} supervoxels, "
-              f"{stats['dmg_nodes']} DMG nodes, {stats['dmg_edges']} edges, {stats['dmg_components']} components")
-        matrix = manipulability_matrix(graph)
-        npy, matrix_png = save_matrix(matrix, output / f"{name}_manipulability.png")
-        print(f"   manipulability: {matrix.sampled} poses sampled, {len(matrix.matrix)} valid, "
-              f"{matrix.block_sizes.size} blocks (largest {matrix.block_sizes.max()}) -> {matrix_png}")
-        i, j = _demo_pair(matrix)
-        start = GripperPose(matrix.positions[i], Rotation.from_matrix(matrix.rotations[i]).as_quat())
-        goal = GripperPose(matrix.positions[j], Rotation.from_matrix(matrix.rotations[j]).as_quat())
-        result = plan(graph, start, goal, SearchOptions(principal_finger=0))
-        print("   plan between distant poses of the largest block, fingers turned >= 90 deg:")
-        print_plan(result)
-        picture = draw_graph(graph, output / f"{name}_plan.png", result, title=name)
-        print(f"   picture: {picture}")
-        summary[name] = {"graph": {**stats, "source": source, "seconds": seconds},
-                         "matrix": {"sampled": matrix.sampled, "valid": len(matrix.matrix),
-                                    "blocks": matrix.block_sizes.tolist(), "png": str(matrix_png), "npy": str(npy)},
-                         "plan": plan_summary(result), "picture": str(picture)}
-        if not result.success:
-            print(f"   plan failed: {result.message}")
-    library.shutdown()
+    bag = output / "bag"
+    shutil.rmtree(bag, ignore_errors=True)
+    specs = load_launch_file(config_dir() / "launch" / f"{settings.launch}.yaml")
+    for spec in specs:
+        if spec.name == "sim_bridge":
+            spec.parameters.update(record_path=str(output / "camera.mp4"), record_every=settings.camera_video_every)
+    specs.append(NodeSpec("recorder", [sys.executable, "-m", "dmg_bringup.cli", "bag", "record", "-a", "-o", str(bag)],
+                          required=False))
+    print(f"bringing up the cell ({', '.join(s.name for s in specs)}); node logs: {output / 'cell.log'}", flush=True)
+    with (output / "cell.log").open("w") as log:
+        launcher = Launcher(specs, log=log)
+        launcher.start()
+        try:
+            summary = _operate(settings, launcher)
+        finally:
+            launcher.stop()
+    if summary.get("plan"):
+        summary["pictures"] = _pictures(settings, bag, summary, output)
     (output / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print(f"\nsummary: {output / 'summary.json'}")
-    return 0 if all(entry["plan"]["status"] == "OK" for entry in summary.values()) else 1
+    print(f"summary: {output / 'summary.json'}")
+    return 0 if summary.get("success") else 1
+
+
+def _operate(settings: DemoSettings, launcher) -> dict:
+    """Reset, plan, execute, judge: what an operator does, over ROS."""
+    from dmg_bringup.cell_client import CellClient, CellError
+    from dmg_bringup.geometry_messages import transform_from_pose
+    from dmg_bringup.monitor import ProgressLines, StateSample
+    from dmg_bringup.ros_verbs import cli_node
+    from dmg_planner.transforms import distance
+
+    def dead() -> str | None:
+        gone = launcher.dead_required()
+        return f"node {gone[0]} exited with {gone[1]} (see cell.log)" if gone else None
+
+    summary: dict = {"settings": asdict(settings), "success": False}
+    with cli_node("dmg_demo") as node:
+        cell = CellClient(node, guard=dead)
+        try:
+            began = time.monotonic()
+            cell.wait_until_ready(settings.ready_timeout)
+            cell.reset(settings.object)
+            print(f"cell ready in {time.monotonic() - began:.0f} s; {settings.object} held in gripper 1", flush=True)
+            time.sleep(1.0)     # the recorder subscribes to new topics every 0.5 s
+            start = cell.perceived_grasp()
+            goal = goal_grasp(start, settings.turn_deg, settings.shift)
+            response = cell.plan(settings.object, start, goal)
+            if not response.success:
+                summary["error"] = f"planner: {response.message}"
+                print(f"no plan: {response.message}")
+                return summary
+            plan = response.plan
+            print(f"plan ({plan.planning_time * 1000:.0f} ms): goal = grasp turned {settings.turn_deg:g} deg about "
+                  f"its axis and moved {settings.shift * 1000:g} mm along the fingers")
+            for i, primitive in enumerate(plan.primitives):
+                print(f"  {i + 1}. {_describe(primitive)}")
+            lines = ProgressLines()
+            cell.state_listeners.append(lambda msg: [print("  " + line, flush=True)
+                                                     for line in lines.feed(StateSample.of(msg))])
+            result = cell.execute(plan, settings.alpha, settings.run_timeout)
+            cell.spin_for(0.5)
+            truth = cell.true_grasp()
+            planned_goal = transform_from_pose(plan.primitives[-1].gripper_after) if plan.primitives else start
+            position_error, angle_error = distance(truth, planned_goal)
+            requested = distance(truth, goal)
+        except CellError as exc:
+            summary["error"] = str(exc)
+            print(f"dmg demo: error: {exc}", file=sys.stderr)
+            return summary
+    summary.update(
+        success=bool(result.success), message=result.message, primitives_completed=result.primitives_completed,
+        execution_time=result.execution_time, plan={
+            "primitives": [_describe(p) for p in plan.primitives], "planning_time": plan.planning_time,
+            "principal_path": _points(plan.principal_path).tolist(),
+            "secondary_path": _points(plan.secondary_path).tolist()},
+        perceived={"position_error": result.final_position_error, "angle_error_deg":
+                   math.degrees(result.final_angle_error)},
+        ground_truth={"position_error": position_error, "angle_error_deg": math.degrees(angle_error),
+                      "vs_requested_goal": {"position_error": requested[0],
+                                            "angle_error_deg": math.degrees(requested[1])}})
+    print(f"\n{'SUCCESS' if result.success else 'FAILED'}: {result.message}\n"
+          f"  error to the planned goal grasp (simulator ground truth): {position_error * 1000:.1f} mm, "
+          f"{math.degrees(angle_error):.1f} deg (to the requested one: {requested[0] * 1000:.1f} mm, "
+          f"{math.degrees(requested[1]):.1f} deg); perceived: {result.final_position_error * 1000:.1f} mm, "
+          f"{math.degrees(result.final_angle_error):.1f} deg\n"
+          f"  {result.primitives_completed} primitive(s) in {result.execution_time:.1f} s (simulated)", flush=True)
+    return summary
+
+
+def _pictures(settings: DemoSettings, bag: Path, summary: dict, output: Path) -> dict:
+    """DMG with planned and executed paths, errors over time, manipulability, camera frames."""
+    from dmg_bringup.environment import parameter_defaults
+    from dmg_bringup.report import camera_frames, frame_sheet, plot_errors, read_run
+    from dmg_planner.library import ObjectLibrary
+    from dmg_planner.graph_parameters import GraphParameters
+    from dmg_planner.manipulability import manipulability_matrix, save_matrix
+    from dmg_planner.pictures import ContactPath, draw_graph
+    from dmg_planner.search import SearchOptions
+
+    pictures = {}
+    cache = parameter_defaults("planner")["cache_dir"]
+    library = ObjectLibrary(GraphParameters(seed_resolution=0.0), SearchOptions(),
+                            Path(cache).expanduser() if cache else None)
+    graph = library.load_config_object(settings.object, wait=True).entry.graph
+    library.shutdown()
+    record = read_run(bag)
+    paths = [ContactPath(np.array(summary["plan"]["principal_path"]), "red", "planned principal"),
+             ContactPath(np.array(summary["plan"]["secondary_path"]), "blue", "planned secondary"),
+             ContactPath(record.contacts[np.isfinite(record.contacts).all(axis=1)], "black", "executed (perceived)")]
+    pictures["dmg"] = str(draw_graph(graph, output / "dmg.png", paths, title=settings.object,
+                                     subtitle=f"plan: {', '.join(summary['plan']['primitives'])}"))
+    pictures["errors"] = str(plot_errors(record, output / "errors.png"))
+    pictures["manipulability"] = str(save_matrix(manipulability_matrix(graph), output / "manipulability.png")[1])
+    marks = record.marks()
+    frames = camera_frames(bag, [record.start + t for t, _ in marks])
+    pictures["camera_frames"] = str(frame_sheet(frames, [f"{label} ({t:.1f} s)" for t, label in marks],
+                                                output / "camera_frames.png"))
+    for name, path in pictures.items():
+        print(f"picture ({name}): {path}")
+    return pictures
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("demo", help="the main job on shipped defaults (see README)", description=__doc__,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--objects", nargs="*", help=f"objects to run (default all: {', '.join(object_names())})")
-    p.add_argument("-o", "--output", default="out/demo", help="directory for pictures and summary.json")
-    p.add_argument("--cache-dir", default=str(Path("~/.cache/dmg/graphs").expanduser()),
-                   help="graph cache directory ('' disables)")
+    p = subparsers.add_parser("demo", help="the main job: the simulated cell repositions an object (see README)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--object", help=f"shipped object ({', '.join(object_names())}; default in config/demo.yaml)")
+    p.add_argument("--turn-deg", dest="turn_deg", type=float, help="goal turn about the grasp axis [deg]")
+    p.add_argument("--shift", type=float, help="goal move along the fingers [m]")
+    p.add_argument("--alpha", type=float, help="ECTS coordination 0..1")
+    p.add_argument("-o", "--output", help="output directory (default out/demo)")
     p.set_defaults(handler=run_demo)

@@ -180,7 +180,7 @@ def cmd_matrix(args: argparse.Namespace) -> int:
 
 
 def cmd_show(args: argparse.Namespace) -> int:
-    from dmg_planner.pictures import draw_graph
+    from dmg_planner.pictures import draw_graph, plan_heading, plan_paths
     from dmg_planner.search import plan
 
     graph = load_source(args)
@@ -191,7 +191,8 @@ def cmd_show(args: argparse.Namespace) -> int:
         result = plan(graph, parse_grasp(graph, args.start, "start", args.principal),
                       parse_grasp(graph, args.goal, "goal", args.principal), _options(args))
         print_plan(result)
-    path = draw_graph(graph, args.output, result, title=Path(args.source).stem)
+    path = draw_graph(graph, args.output, plan_paths(result) if result else [], title=Path(args.source).stem,
+                      subtitle=plan_heading(result) if result else "")
     print(f"wrote {path}")
     return 0
 

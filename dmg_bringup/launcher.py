@@ -29,6 +29,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import yaml
 
@@ -85,9 +86,11 @@ def _die_with_parent() -> None:
 
 
 class Launcher:
-    def __init__(self, specs: list[NodeSpec], grace: float = 5.0) -> None:
+    def __init__(self, specs: list[NodeSpec], grace: float = 5.0, log: TextIO | None = None) -> None:
+        """`log`: where the children's prefixed output and the launcher's own lines go (default stdout)."""
         self.specs = specs
         self.grace = grace
+        self.log = log or sys.stdout
         self.processes: dict[str, subprocess.Popen] = {}
         self.param_dir = tempfile.TemporaryDirectory(prefix="dmg_up_") if any(s.parameters for s in specs) else None
         self.stopping = threading.Event()
@@ -102,11 +105,11 @@ class Launcher:
             else [*spec.command, "--ros-args", "--params-file", str(params)]
 
     def _pipe(self, name: str, colour: str, stream) -> None:
-        tty = sys.stdout.isatty()
+        tty = self.log.isatty()
         prefix = f"{colour}[{name:<{self.width}}]\033[0m " if tty else f"[{name:<{self.width}}] "
         for line in iter(stream.readline, ""):
-            sys.stdout.write(prefix + line)
-            sys.stdout.flush()
+            self.log.write(prefix + line)
+            self.log.flush()
 
     def start(self) -> None:
         env = ros_environment()
@@ -116,23 +119,30 @@ class Launcher:
                                        stderr=subprocess.STDOUT, text=True, bufsize=1,
                                        start_new_session=True, preexec_fn=_die_with_parent)
             self.processes[spec.name] = process
-            print(f"[dmg up] started {spec.name} (pid {process.pid}): {' '.join(spec.command)}", flush=True)
+            print(f"[dmg up] started {spec.name} (pid {process.pid}): {' '.join(spec.command)}", file=self.log,
+                  flush=True)
         for i, (name, process) in enumerate(self.processes.items()):
             threading.Thread(target=self._pipe, args=(name, COLOURS[i % len(COLOURS)], process.stdout),
                              daemon=True).start()
+
+    def dead_required(self) -> tuple[str, int] | None:
+        """(name, exit code) of a required child that has exited, if any."""
+        for spec in self.specs:
+            code = self.processes[spec.name].poll()
+            if code is not None and spec.required:
+                return spec.name, code
+        return None
 
     def wait(self) -> int:
         """Run until a signal or until a required node exits; return the exit code."""
         code = 0
         while not self.stopping.is_set():
-            for spec in self.specs:
-                returncode = self.processes[spec.name].poll()
-                if returncode is not None and spec.required:
-                    print(f"[dmg up] required node {spec.name} exited with {returncode}; stopping all",
-                          flush=True)
-                    code = returncode or 0
-                    self.stopping.set()
-                    break
+            dead = self.dead_required()
+            if dead:
+                print(f"[dmg up] required node {dead[0]} exited with {dead[1]}; stopping all", file=self.log,
+                      flush=True)
+                code = dead[1] or 0
+                break
             if all(p.poll() is not None for p in self.processes.values()):
                 break
             self.stopping.wait(0.1)
@@ -153,7 +163,7 @@ class Launcher:
             while time.monotonic() < deadline and any(p.poll() is None for p in alive):
                 time.sleep(0.05)
         for name, process in self.processes.items():
-            print(f"[dmg up] {name} exited with {process.wait()}", flush=True)
+            print(f"[dmg up] {name} exited with {process.wait()}", file=self.log, flush=True)
         if self.param_dir is not None:
             self.param_dir.cleanup()
 

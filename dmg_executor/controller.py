@@ -105,6 +105,7 @@ class Progress:
     contact_error: float     # m, remaining principal contact displacement of the current primitive
     angle_error: float       # rad, remaining angle about the grasp axis
     pushes: int              # pushes done on the current primitive
+    contact: np.ndarray      # m, perceived principal contact in the object frame (NaN before a pose)
 
 
 @dataclass
@@ -187,7 +188,7 @@ class PlanExecutor:
 
     def progress(self) -> Progress:
         return Progress(min(self.index, len(self.primitives) - 1) if self.primitives else 0, len(self.primitives),
-                        self.step, self.errors[0], self.errors[1], self.pushes)
+                        self.step, self.errors[0], self.errors[1], self.pushes, self.principal_contact(self.last))
 
     def update(self, observation: Observation) -> Command:
         """One control tick: the arms' twists and any gripper command."""
@@ -564,15 +565,20 @@ class PlanExecutor:
         self.errors = (float(np.linalg.norm(self._remaining_motion(obs))),
                        _rotation_about_axis(target[:3, :3] @ obs.object_in_holder[:3, :3].T))
 
+    def principal_contact(self, obs: Observation) -> np.ndarray:
+        """Where the principal finger touches the object, in the object frame, as perceived."""
+        if obs.object_in_holder is None:
+            return np.full(3, math.nan)
+        side = -1.0 if self.principal_finger == 0 else 1.0
+        return apply(invert(obs.object_in_holder), [side * obs.opening / 2, 0.0, 0.0])
+
     def final_errors(self, obs: Observation) -> tuple[float, float]:
         """(principal contact vs the goal contact [m], gripper orientation vs the goal's [rad])."""
         if not self.primitives or obs.object_in_holder is None:
             return (0.0, 0.0) if not self.primitives else (math.nan, math.nan)
         last = self.primitives[-1]
-        side = -1.0 if self.principal_finger == 0 else 1.0
-        holder_in_object = invert(obs.object_in_holder)
-        contact = apply(holder_in_object, [side * obs.opening / 2, 0.0, 0.0])
-        return float(np.linalg.norm(contact - last.contact_after)), distance(holder_in_object, last.gripper_after)[1]
+        return (float(np.linalg.norm(self.principal_contact(obs) - last.contact_after)),
+                distance(invert(obs.object_in_holder), last.gripper_after)[1])
 
     def _limits(self, obs: Observation) -> tuple[Outcome, str] | None:
         s = self.settings

@@ -23,8 +23,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, TwistStamped
+from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, TwistStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
@@ -263,12 +262,10 @@ class ExecutorNode(Node):
                 model = load_object(object_id)
             except KeyError as error:
                 raise GoalError(Outcome.BAD_REQUEST, str(error.args[0])) from None
-            mesh = o3d.io.read_triangle_mesh(str(model.mesh_path))
-            scale = {"m": 1.0, "mm": 0.001}.get(model.units, 1.0)
-            if len(mesh.triangles) == 0:
-                raise GoalError(Outcome.BAD_REQUEST, f"object '{object_id}': mesh {model.mesh_path} has no triangles")
-            self.objects[object_id] = (ObjectSurface(np.asarray(mesh.vertices) * scale, np.asarray(mesh.triangles)),
-                                       TagLayout.of(model))
+            try:
+                self.objects[object_id] = (ObjectSurface.of(model), TagLayout.of(model))
+            except ValueError as error:
+                raise GoalError(Outcome.BAD_REQUEST, str(error)) from None
         return self.objects[object_id]
 
     def ask_planner(self, request):
@@ -391,6 +388,7 @@ class ExecutorNode(Node):
             primitive_count=progress.primitive_count, kind=int(primitive.kind) if primitive else 0,
             step=int(progress.step), step_name=progress.step.name, contact_error=float(progress.contact_error),
             angle_error=float(progress.angle_error), alpha=run.executor.alpha,
+            contact=Point(**dict(zip("xyz", map(float, progress.contact)))),
             message=result.message if result else "; ".join(run.executor.notes)))
 
     def publish_idle_state(self) -> None:

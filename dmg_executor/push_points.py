@@ -42,6 +42,15 @@ class ObjectSurface:
         self.vertices = np.asarray(vertices, float)
         self.reach = 2.0 * float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
 
+    @classmethod
+    def of(cls, model) -> ObjectSurface:
+        """The surface of a shipped/loaded object model (its mesh file, in metres); ValueError if empty."""
+        mesh = o3d.io.read_triangle_mesh(str(model.mesh_path))
+        if len(mesh.triangles) == 0:
+            raise ValueError(f"object '{model.name}': mesh {model.mesh_path} has no triangles")
+        scale = {"m": 1.0, "mm": 0.001}.get(model.units, 1.0)
+        return cls(np.asarray(mesh.vertices) * scale, np.asarray(mesh.triangles))
+
     def entry(self, target: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """Where a ray aimed along `direction` at `target`, from outside the object, first meets it:
         (point, outward normal), or None."""

@@ -17,7 +17,11 @@ from enum import Enum, IntEnum
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+from scipy.spatial.transform import Rotation
+
 from dmg_planner.graph import DexterousManipulationGraph, GraphParameters, build_graph
+from dmg_planner.manipulability import ManipulabilityMatrix, manipulability_matrix, regrasp_hint
 from dmg_planner.objects import load_object
 from dmg_planner.search import GripperPose, PlanResult, PlanStatus, SearchOptions, plan
 from dmg_planner.shape import UNIT_SCALE, ShapeError, load_shape
@@ -56,6 +60,7 @@ class LoadedObject:
     from_cache: bool = False
     build_time: float = 0.0
     done: threading.Event = field(default_factory=threading.Event)
+    matrix: ManipulabilityMatrix | None = None    # computed on the first regrasp question
 
     def statistics(self) -> dict:
         stats = self.graph.statistics() if self.graph is not None else {}
@@ -203,7 +208,24 @@ class ObjectLibrary:
             return PlanResult(PlanStatus.NOT_READY, f"{object_id}: the graph is still being built; retry shortly")
         if entry.state == ObjectState.FAILED:
             return PlanResult(PlanStatus.NOT_READY, f"{object_id}: no graph ({entry.error}); load it again")
-        return plan(entry.graph, start, goal, options)
+        result = plan(entry.graph, start, goal, options)
+        if result.status == PlanStatus.DIFFERENT_COMPONENTS:
+            result = self._with_regrasp_hint(entry, result, start, goal, options)
+        return result
+
+    @staticmethod
+    def _with_regrasp_hint(entry: LoadedObject, result: PlanResult, start: GripperPose, goal: GripperPose,
+                           options: SearchOptions) -> PlanResult:
+        """Name the grasp (from the manipulability matrix) from which the goal can be reached in hand."""
+        if entry.matrix is None:
+            entry.matrix = manipulability_matrix(entry.graph)
+        current = np.eye(4)
+        current[:3, :3], current[:3, 3] = Rotation.from_quat(start.quaternion).as_matrix(), start.position
+        hint = regrasp_hint(entry.graph, entry.matrix, current, goal, options)
+        if hint is None:
+            return replace(result, message=f"{result.message}; no sampled grasp of the manipulability matrix reaches "
+                                           "the goal either")
+        return replace(result, message=f"{result.message}; {hint.describe()}", regrasp_pose=hint.pose)
 
     def shutdown(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

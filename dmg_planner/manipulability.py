@@ -19,7 +19,8 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from dmg_planner.graph import DexterousManipulationGraph
-from dmg_planner.search import GraspFault, SearchOptions, locate_grasps, state_graph
+from dmg_planner.search import (GraspError, GraspFault, GripperPose, PlanResult, SearchOptions, locate_grasps, plan,
+                               resolve_grasp, state_graph)
 
 
 @dataclass
@@ -135,3 +136,54 @@ def save_matrix(result: ManipulabilityMatrix, path: str | Path) -> tuple[Path, P
     figure.savefig(png)
     plt.close(figure)
     return npy, png
+
+
+@dataclass
+class RegraspHint:
+    """Where to regrasp so that the goal becomes reachable in hand (the paper's future work)."""
+    block: int                  # manipulability block whose poses reach the goal
+    component: int              # principal finger's DMG component in that block
+    poses: int                  # sampled poses in the block
+    low: np.ndarray             # (3,) m, extent of the block's gripper positions (object frame)
+    high: np.ndarray
+    pose: np.ndarray            # 4x4 gripper pose of the block nearest to the current grasp
+    plan_from_pose: PlanResult  # the in-hand plan from `pose` to the goal
+
+    def describe(self) -> str:
+        mm = np.round(self.pose[:3, 3] * 1000, 1).tolist()
+        spread = ", ".join(f"{axis} {lo * 1000:.0f}..{hi * 1000:.0f}" for axis, lo, hi in zip("xyz", self.low, self.high))
+        return (f"regrasp into component {self.component} (manipulability block {self.block}: {self.poses} sampled "
+                f"poses, gripper at {spread} mm in the object frame); nearest to the current grasp: gripper at "
+                f"{mm} mm, from there {len(self.plan_from_pose.primitives)} primitive(s) reach the goal")
+
+
+def regrasp_hint(graph: DexterousManipulationGraph, matrix: ManipulabilityMatrix, current: np.ndarray,
+                 goal: GripperPose, options: SearchOptions = SearchOptions()) -> RegraspHint | None:
+    """The block of the manipulability matrix from which `goal` is reachable, and its pose nearest
+    to the `current` grasp (4x4, object frame; distance + 20 mm per radian of turn). None when no
+    sampled pose reaches the goal."""
+    from scipy.spatial.transform import Rotation
+
+    try:
+        goal_component = int(graph.node_component[resolve_grasp(graph, goal, 0, "goal").node])
+    except GraspError:
+        return None
+    rows = np.flatnonzero(matrix.components == goal_component)   # the principal finger must end there
+    turn = Rotation.from_matrix(matrix.rotations[rows]).inv() * Rotation.from_matrix(current[:3, :3])
+    cost = np.linalg.norm(matrix.positions[rows] - current[:3, 3], axis=1) + 0.02 * turn.magnitude()
+    tried: set[int] = set()
+    for row in rows[np.argsort(cost)]:
+        block = int(matrix.blocks[row])
+        if block in tried:
+            continue
+        tried.add(block)
+        start = GripperPose(matrix.positions[row], Rotation.from_matrix(matrix.rotations[row]).as_quat())
+        result = plan(graph, start, goal, options)
+        if result.success:
+            members = matrix.blocks == block
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = matrix.rotations[row], matrix.positions[row]
+            return RegraspHint(block, int(matrix.components[row]), int(members.sum()),
+                               matrix.positions[members].min(axis=0), matrix.positions[members].max(axis=0),
+                               pose, result)
+    return None

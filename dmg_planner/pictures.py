@@ -1,6 +1,7 @@
 """Pictures people would rather look at than read: the object, its DMG and a plan."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,32 @@ from dmg_planner.graph import DexterousManipulationGraph
 from dmg_planner.search import PlanResult
 
 
-def draw_graph(graph: DexterousManipulationGraph, output: str | Path, result: PlanResult | None = None,
-               title: str = "", views: tuple[tuple[float, float], ...] = ((25, -60), (-25, 120))) -> Path:
+@dataclass(frozen=True)
+class ContactPath:
+    """A polyline of finger contacts on the object [m, object frame] and how to draw it."""
+    points: np.ndarray
+    colour: str
+    label: str
+
+
+def plan_paths(result: PlanResult) -> list[ContactPath]:
+    """A plan's principal (red) and secondary (blue) contact paths (none when it failed)."""
+    if not result.success:
+        return []
+    return [ContactPath(result.principal_path, "red", "principal finger"),
+            ContactPath(result.secondary_path, "blue", "secondary finger")]
+
+
+def plan_heading(result: PlanResult) -> str:
+    return f"plan: {result.status.name}, {len(result.primitives)} primitives" + (
+        f", cost {result.cost * 1000:.1f}" if result.success else "")
+
+
+def draw_graph(graph: DexterousManipulationGraph, output: str | Path, paths: list[ContactPath] = (),
+               title: str = "", subtitle: str = "",
+               views: tuple[tuple[float, float], ...] = ((25, -60), (-25, 120))) -> Path:
     """PNG with the mesh, vertices coloured by C_DMG component (grey = dropped), DMG edges,
-    and the principal (red) and secondary (blue) contact paths of a plan; two view angles."""
+    and contact paths (a plan's, an executed one); two view angles."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -39,13 +62,11 @@ def draw_graph(graph: DexterousManipulationGraph, output: str | Path, result: Pl
             axes.add_collection3d(Line3DCollection(segments, colors=(0.3, 0.3, 0.3, 0.35), linewidths=0.5))
         points = graph.positions * mm
         axes.scatter(*points.T, c=colours, s=10, depthshade=False)
-        if result is not None and result.success:
-            for path, colour, label in ((result.principal_path, "red", "principal finger"),
-                                        (result.secondary_path, "blue", "secondary finger")):
-                axes.plot(*(path * mm).T, color=colour, linewidth=2.5, label=label)
-                axes.scatter(*(path[[0, -1]] * mm).T, color=colour, s=50, marker="o", edgecolors="black")
-            if i == 0:
-                axes.legend(loc="upper left")
+        for path in paths:
+            axes.plot(*(path.points * mm).T, color=path.colour, linewidth=2.5, label=path.label)
+            axes.scatter(*(path.points[[0, -1]] * mm).T, color=path.colour, s=50, marker="o", edgecolors="black")
+        if paths and i == 0:
+            axes.legend(loc="upper left")
         axes.set_xlim(low[0], high[0])
         axes.set_ylim(low[1], high[1])
         axes.set_zlim(low[2], high[2])
@@ -57,9 +78,8 @@ def draw_graph(graph: DexterousManipulationGraph, output: str | Path, result: Pl
     stats = graph.statistics()
     heading = (f"{title}: {stats['supervoxels']} supervoxels, {stats['dmg_nodes']} DMG nodes, "
                f"{stats['dmg_components']} components")
-    if result is not None:
-        heading += f"\nplan: {result.status.name}, {len(result.primitives)} primitives" + (
-            f", cost {result.cost * 1000:.1f}" if result.success else "")
+    if subtitle:
+        heading += "\n" + subtitle
     figure.suptitle(heading)
     figure.tight_layout()
     figure.savefig(output)

@@ -112,6 +112,9 @@ class PlannerNode(Node):
         response.message = result.message
         response.start_component = int(result.start_component)
         response.goal_component = int(result.goal_component)
+        if result.regrasp_pose is not None:
+            response.regrasp_suggested = True
+            response.regrasp_pose = rc.pose_message(result.regrasp_pose)
         if response.success:
             rc.fill_plan(response.plan, result, request, self.frame_prefix + request.object_id,
                          self.get_clock().now().to_msg())

@@ -136,6 +136,7 @@ class PlanResult:
     planning_time: float = 0.0
     start: Grasp | None = None
     goal: Grasp | None = None
+    regrasp_pose: np.ndarray | None = None   # DIFFERENT_COMPONENTS: 4x4 gripper pose to regrasp at (object frame)
 
     @property
     def success(self) -> bool:

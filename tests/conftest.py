@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -39,8 +40,10 @@ def helper_command(script: str, *args: str) -> list[str]:
 class Processes:
     """Background processes of one test, stopped (and reaped) when the test ends."""
 
-    def __init__(self) -> None:
+    def __init__(self, log_dir: Path | None = None) -> None:
         self.started: list[subprocess.Popen] = []
+        self.log_dir = log_dir
+        self.logs: dict[int, Path] = {}
 
     def start(self, command: list[str], **kwargs) -> subprocess.Popen:
         kwargs.setdefault("stdout", subprocess.PIPE)
@@ -48,6 +51,19 @@ class Processes:
         process = subprocess.Popen(command, text=True, start_new_session=True, **kwargs)
         self.started.append(process)
         return process
+
+    def start_logged(self, name: str, command: list[str]) -> subprocess.Popen:
+        """A long-running node whose output goes to a file: an unread pipe fills after 64 KiB and then
+        blocks the node in its next log call."""
+        log = Path(tempfile.mkstemp(prefix=f"{name}-", suffix=".log", dir=self.log_dir)[1])
+        with log.open("w") as sink:
+            process = self.start(command, stdout=sink, stderr=subprocess.STDOUT)
+        self.logs[process.pid] = log
+        return process
+
+    def output(self, process: subprocess.Popen, tail: int = 6000) -> str:
+        """The end of a logged process's output (for failure messages)."""
+        return self.logs[process.pid].read_text(errors="replace")[-tail:]
 
     def stop_all(self) -> None:
         for process in self.started:
@@ -63,8 +79,8 @@ class Processes:
 
 
 @pytest.fixture
-def processes() -> Iterator[Processes]:
-    procs = Processes()
+def processes(tmp_path: Path) -> Iterator[Processes]:
+    procs = Processes(tmp_path)
     yield procs
     procs.stop_all()
 

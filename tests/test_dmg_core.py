@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dmg_planner.graph import GraphParameters, build_graph
-from dmg_planner.manipulability import manipulability_matrix, save_matrix
+from dmg_planner.manipulability import manipulability_matrix, regrasp_hint, save_matrix
 from dmg_planner.objects import load_object
 from dmg_planner.primitives import PrimitiveKind
 from dmg_planner.search import GripperPose, PlanStatus, SearchOptions, grasp_pose, plan
@@ -182,6 +182,26 @@ def test_different_components_is_a_regrasp_result_not_an_exception(box):
     assert result.status == PlanStatus.DIFFERENT_COMPONENTS
     assert "regrasp" in result.message
     assert result.start_component != result.goal_component >= 0
+
+
+def test_regrasp_hint_names_a_grasp_from_which_the_goal_is_reachable(box):
+    start = grasp_pose(box, [0.0, 0.0, 0.02], 0.0)
+    goal = grasp_pose(box, [0.05, 0.0, 0.0], 0.0)
+    current = np.eye(4)
+    current[:3, :3], current[:3, 3] = Rotation.from_quat(start.quaternion).as_matrix(), start.position
+    matrix = manipulability_matrix(box)
+    hint = regrasp_hint(box, matrix, current, goal)
+    assert hint is not None
+    assert hint.component == plan(box, start, goal).goal_component
+    suggested = GripperPose(hint.pose[:3, 3], Rotation.from_matrix(hint.pose[:3, :3]).as_quat())
+    assert plan(box, suggested, goal).success and hint.plan_from_pose.success
+    assert np.all(hint.low <= hint.pose[:3, 3] + 1e-9) and np.all(hint.pose[:3, 3] <= hint.high + 1e-9)
+    assert f"component {hint.component}" in hint.describe()
+    # the same goal from its own component needs no regrasp: every pose of the hint's block reaches it
+    block_rows = np.flatnonzero(matrix.blocks == hint.block)
+    row = block_rows[len(block_rows) // 2]
+    other = GripperPose(matrix.positions[row], Rotation.from_matrix(matrix.rotations[row]).as_quat())
+    assert plan(box, other, goal).success
 
 
 @pytest.mark.parametrize("pose, status, words", [

@@ -3,7 +3,6 @@ separate processes over real DDS; success is judged against the simulator's grou
 from __future__ import annotations
 
 import math
-import subprocess
 
 import numpy as np
 import pytest
@@ -90,14 +89,14 @@ class Operator(RosTestNode):
 
 
 @pytest.fixture(scope="module")
-def cell():
-    processes = Processes()
+def cell(tmp_path_factory):
+    processes = Processes(tmp_path_factory.mktemp("executor-cell"))
     sim_time = ["--ros-args", "-p", "use_sim_time:=true"]
-    sim = processes.start([DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args", "-p", "clock_rate:=100.0",
-                           "-p", "state_rate:=50.0"], stderr=subprocess.STDOUT)
+    sim = processes.start_logged("sim_bridge", [DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args",
+                                  "-p", "clock_rate:=100.0", "-p", "state_rate:=50.0"])
     for package, executable in (("dmg_perception", "perception_node"), ("dmg_planner", "planner_node"),
                                 ("dmg_executor", "executor_node")):
-        processes.start([DMG, "run", package, executable, *sim_time], stderr=subprocess.STDOUT)
+        processes.start_logged(executable, [DMG, "run", package, executable, *sim_time])
     operator = Operator()
     operator.sim = sim
     try:

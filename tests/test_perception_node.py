@@ -1,7 +1,6 @@
 """perception_node on the simulated cell: both as separate processes over real DDS."""
 from __future__ import annotations
 
-import subprocess
 import time
 
 import numpy as np
@@ -58,13 +57,13 @@ def transform(pose) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def cell():
-    processes = Processes()
-    sim = processes.start([DMG, "run", "dmg_sim_bridge", "sim_bridge_node"], stderr=subprocess.STDOUT)
-    perception = processes.start([DMG, "run", "dmg_perception", "perception_node", "--ros-args",
-                                  "-p", "use_sim_time:=true", "-p", "debug_image:=true"], stderr=subprocess.STDOUT)
-    bad = processes.start([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-r", "__ns:=/bad"],
-                          stderr=subprocess.STDOUT)
+def cell(tmp_path_factory):
+    processes = Processes(tmp_path_factory.mktemp("perception-cell"))
+    sim = processes.start_logged("sim_bridge", [DMG, "run", "dmg_sim_bridge", "sim_bridge_node"])
+    perception = processes.start_logged("perception", [DMG, "run", "dmg_perception", "perception_node", "--ros-args",
+                                                       "-p", "use_sim_time:=true", "-p", "debug_image:=true"])
+    bad = processes.start_logged("perception_bad", [DMG, "run", "dmg_perception", "perception_node",
+                                                    "--ros-args", "-r", "__ns:=/bad"])
     watcher = Watcher()
     try:
         watcher.wait_for(lambda: watcher.latest.get("/perception/object_pose"), timeout=60, what="a first object pose")

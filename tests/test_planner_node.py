@@ -203,6 +203,12 @@ def test_every_error_code_is_reachable_and_the_node_keeps_serving(planner, graph
     for (object_id, start, goal), code, words in cases:
         result = client.plan(object_id, start, goal)
         assert not result.success and result.error_code == code and words in result.message, (code, result.message)
+        assert result.regrasp_suggested == (code == response.DIFFERENT_COMPONENTS)
+    # the regrasp hint: from the suggested grasp the goal is reachable in hand
+    hint = client.plan("box", top, side)
+    assert f"regrasp into component {hint.goal_component}" in hint.message
+    p, q = hint.regrasp_pose.position, hint.regrasp_pose.orientation
+    assert client.plan("box", GripperPose(np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])), side).success
     assert client.plan("box", top, top, principal=5).error_code == response.BAD_REQUEST
     # NOT_READY: a fine graph of a new object is still building when the plan arrives.
     loaded = client.load(object_id="fine_box", mesh_path=str(load_object("box").mesh_path), wait=False,

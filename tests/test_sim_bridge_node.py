@@ -84,24 +84,20 @@ def stamp(msg) -> float:
 
 
 @pytest.fixture(scope="module")
-def bridge():
-    processes = Processes()
-    process = processes.start([DMG, "run", "dmg_sim_bridge", "sim_bridge_node"], stderr=subprocess.STDOUT)
+def bridge(tmp_path_factory):
+    processes = Processes(tmp_path_factory.mktemp("sim-bridge"))
+    process = processes.start_logged("sim_bridge", [DMG, "run", "dmg_sim_bridge", "sim_bridge_node"])
     client = CellClient()
     try:
         client.wait_for(lambda: client.latest.get("/arm2/camera/image_raw"), timeout=60, what="the first camera image")
-        yield process, client
+        yield process, client, processes
     finally:
         client.close()
         processes.stop_all()
 
 
-def output_of(process: subprocess.Popen) -> str:
-    return process.stdout.read() if process.poll() is not None else ""
-
-
 def test_publishes_the_cell_state_camera_and_ground_truth(bridge):
-    process, client = bridge
+    process, client, processes = bridge
     start = client.sim_time()
     client.spin(0.5)
     assert client.sim_time() > start
@@ -124,7 +120,7 @@ def test_publishes_the_cell_state_camera_and_ground_truth(bridge):
 
 
 def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
-    _, client = bridge
+    _, client, _ = bridge
     topic = "/arm2/endpoint_pose"
     client.drive("arm2", (0.0, 0.0, 0.04), seconds=0.3)
     client.history[topic].clear()
@@ -143,7 +139,7 @@ def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
 
 
 def test_gripper_command_sets_the_opening(bridge):
-    _, client = bridge
+    _, client, _ = bridge
     client.gripper_pubs["arm2"].publish(client.GripperCommand(opening=0.05, max_force=10.0))
     state = client.wait_for(lambda: (s := client.latest["/arm2/gripper/state"]).opening > 0.049 and s, what="arm2 open")
     assert state.target_opening == pytest.approx(0.05) and state.max_force == pytest.approx(10.0)
@@ -152,7 +148,7 @@ def test_gripper_command_sets_the_opening(bridge):
 
 
 def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
-    process, client = bridge
+    process, client, processes = bridge
     client.spin(0.5)                          # any earlier motion has stopped
     before = position(client.latest["/arm2/endpoint_pose"])
     client.twist("arm2", (math.nan, 0.0, 0.0))
@@ -160,7 +156,7 @@ def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
     client.gripper_pubs["arm1"].publish(client.GripperCommand(opening=5.0, max_force=0.0))
     client.gripper_pubs["arm1"].publish(client.GripperCommand(opening=0.0, max_force=math.inf))
     client.spin(1.5)
-    assert process.poll() is None, output_of(process)
+    assert process.poll() is None, processes.output(process)
     assert np.linalg.norm(position(client.latest["/arm2/endpoint_pose"]) - before) < 1e-4
     assert client.latest["/arm1/gripper/state"].opening == pytest.approx(0.060, abs=0.001)   # still holding
     refused = {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}["commands_refused"]
@@ -168,7 +164,7 @@ def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
 
 
 def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_requests(bridge):
-    process, client = bridge
+    process, client, processes = bridge
     from geometry_msgs.msg import Pose
 
     for fields, reason in [({"object_id": "no_such_object"}, "unknown object"),
