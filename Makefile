@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 DMG := $(VENV)/bin/dmg
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench eval clean
 
 setup:
 	@bash scripts/setup.sh
@@ -20,6 +20,9 @@ bench: setup
 	$(DMG) bench planner -o out/bench_planner.json
 	$(DMG) bench sim -o out/bench_sim.json
 	$(DMG) bench perception -o out/bench_perception.json
+
+eval: setup
+	$(DMG) eval
 
 clean:
 	rm -rf build out

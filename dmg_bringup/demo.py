@@ -23,10 +23,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 from scipy.spatial.transform import Rotation
 
-from dmg_bringup.environment import apply_ros_environment, config_dir
+from dmg_bringup.environment import apply_ros_environment, config_dir, load_settings
 from dmg_planner.objects import object_names
 
 
@@ -44,9 +43,7 @@ class DemoSettings:
 
     @classmethod
     def load(cls, overrides: dict) -> DemoSettings:
-        values = yaml.safe_load((config_dir() / "demo.yaml").read_text())
-        values.update({k: v for k, v in overrides.items() if v is not None and k in cls.__dataclass_fields__})
-        return cls(**values)
+        return load_settings(cls, "demo", overrides)
 
 
 def goal_grasp(start: np.ndarray, turn_deg: float, shift: float) -> np.ndarray:

@@ -58,3 +58,11 @@ def load_parameter_spec(name: str) -> dict[str, dict[str, Any]]:
 def parameter_defaults(name: str) -> dict[str, Any]:
     """The default value of every parameter in config/<name>.yaml (for ROS-free cores and tests)."""
     return {key: entry["value"] for key, entry in load_parameter_spec(name).items()}
+
+
+def load_settings(settings_class: type, name: str, overrides: dict[str, Any]):
+    """A command's settings dataclass from config/<name>.yaml, with the command line's given
+    (non-None) values on top."""
+    values = yaml.safe_load((config_dir() / f"{name}.yaml").read_text())
+    values.update({k: v for k, v in overrides.items() if v is not None and k in settings_class.__dataclass_fields__})
+    return settings_class(**values)

@@ -19,10 +19,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 from scipy.spatial.transform import Rotation
 
-from dmg_bringup.environment import config_dir
+from dmg_bringup.environment import load_settings
 from dmg_planner.objects import object_names
 
 
@@ -44,9 +43,7 @@ class EvalSettings:
 
     @classmethod
     def load(cls, overrides: dict) -> EvalSettings:
-        values = yaml.safe_load((config_dir() / "eval.yaml").read_text())
-        values.update({k: v for k, v in overrides.items() if v is not None and k in cls.__dataclass_fields__})
-        return cls(**values)
+        return load_settings(cls, "eval", overrides)
 
 
 @dataclass
@@ -68,6 +65,8 @@ class RunOutcome:
     angle_error_deg: float
     sim_time: float          # s of the execution
     wall_time: float         # s for the whole run (reset, planning, execution)
+    goal_shift_mm: float     # how far the goal grasp is from the start on the object
+    goal_turn_deg: float     # and how far it is turned
 
 
 def _matrix_pose(matrix, row: int) -> np.ndarray:
@@ -119,8 +118,9 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
     def outcome(name: str, message: str, **values) -> RunOutcome:
         fields = dict(primitives=0, position_error=math.nan, angle_error_deg=math.nan, sim_time=0.0, success=False)
         fields.update(values)
+        shift, turn = distance(pair.start, pair.goal)
         return RunOutcome(model.name, index, alpha, name, message=message, wall_time=time.perf_counter() - began,
-                          **fields)
+                          goal_shift_mm=shift * 1000, goal_turn_deg=math.degrees(turn), **fields)
 
     if loop.seen is None:
         return outcome("NOT_SEEN", "the wrist camera does not see the object's tags at the start")
@@ -172,9 +172,10 @@ def markdown(summary: dict, runs: list[RunOutcome]) -> str:
              row("all", summary["overall"])]
     lines += [row(f"alpha {a}", s) for a, s in summary["by_alpha"].items()]
     lines += [row(o, s) for o, s in summary["by_object"].items()]
-    lines += ["", "| object | pair | alpha | outcome | primitives | position [mm] | angle [deg] | sim s | message |",
-              "|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r.object} | {r.pair} | {r.alpha} | {r.outcome} | {r.primitives} | {r.position_error * 1000:.2f} | "
+    lines += ["", "| object | pair | goal: shift [mm], turn [deg] | alpha | outcome | primitives | position [mm] | "
+              "angle [deg] | sim s | message |", "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r.object} | {r.pair} | {r.goal_shift_mm:.1f}, {r.goal_turn_deg:.0f} | {r.alpha} | {r.outcome} | "
+              f"{r.primitives} | {r.position_error * 1000:.2f} | "
               f"{r.angle_error_deg:.2f} | {r.sim_time:.1f} | {r.message[:120]} |" for r in runs]
     return "\n".join(lines) + "\n"
 
