@@ -70,6 +70,9 @@ def run_demo(args: argparse.Namespace) -> int:
 
     apply_ros_environment()   # node executables resolve through the ament index
     settings = DemoSettings.load(vars(args))
+    if not 0.0 <= settings.alpha <= 1.0:
+        print(f"dmg demo: error: --alpha must be in [0, 1], got {settings.alpha}", file=sys.stderr)
+        return 2
     if settings.object not in object_names():
         print(f"dmg demo: error: unknown object '{settings.object}' (shipped: {', '.join(object_names())})",
               file=sys.stderr)

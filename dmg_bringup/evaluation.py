@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass
@@ -230,9 +231,14 @@ def run_eval(args: argparse.Namespace) -> int:
     from dmg_sim_bridge.cell import Cell
 
     settings = EvalSettings.load(vars(args))
+    if settings.pairs < 1 or not all(0.0 <= a <= 1.0 for a in settings.alphas):
+        print(f"dmg eval: error: need --pairs >= 1 and alphas in [0, 1] (got {settings.pairs}, {settings.alphas})",
+              file=sys.stderr)
+        return 2
     unknown = sorted(set(settings.objects) - set(object_names()))
     if unknown:
-        print(f"dmg eval: error: unknown object(s) {', '.join(unknown)} (shipped: {', '.join(object_names())})")
+        print(f"dmg eval: error: unknown object(s) {', '.join(unknown)} (shipped: {', '.join(object_names())})",
+              file=sys.stderr)
         return 2
     output = Path(settings.output)
     output.mkdir(parents=True, exist_ok=True)
@@ -265,7 +271,7 @@ def run_eval(args: argparse.Namespace) -> int:
         cell.close()
         library.shutdown()
     if not runs:
-        print("dmg eval: error: no runs (no pairs found)")
+        print("dmg eval: error: no runs (no start/goal pairs found)", file=sys.stderr)
         return 1
     summary = summarise(runs)
     report = {"settings": asdict(settings), "summary": summary, "runs": [asdict(r) for r in runs]}

@@ -89,6 +89,10 @@ def test_csv_output_flattens_fields(processes):
      "start.position.x: cannot set 'a'"),
     (["service", "call", "/s", "dmg_interfaces/msg/RepositioningPlan"], "is a msg, a srv type is needed"),
     (["action", "send_goal", "/a", "dmg_interfaces/action/ExecuteRepositioning", "alpha: ]"], "malformed YAML"),
+    (["demo", "--alpha", "1.5"], "--alpha must be in [0, 1]"),
+    (["demo", "--object", "nope"], "unknown object 'nope'"),
+    (["eval", "--objects", "nope"], "unknown object(s) nope"),
+    (["eval", "--alphas", "-0.5"], "alphas in [0, 1]"),
 ])
 def test_bad_input_gives_a_clear_error(args, message):
     result = dmg(*args)
