@@ -67,9 +67,9 @@ class CellClient:
     def wait_until_ready(self, timeout: float) -> None:
         """Every node of the cell answers: sim reset, planner, executor, and a perceived pose."""
         deadline = time.monotonic() + timeout
-        for client, what in ((self.resetter, "/sim/reset (sim bridge)"), (self.planner, "/plan_repositioning"),
-                             (self.actions, "/execute_repositioning")):
-            ready = client.wait_for_service if hasattr(client, "wait_for_service") else client.wait_for_server
+        for ready, what in ((self.resetter.wait_for_service, "/sim/reset (sim bridge)"),
+                            (self.planner.wait_for_service, "/plan_repositioning"),
+                            (self.actions.wait_for_server, "/execute_repositioning")):
             if not ready(timeout_sec=max(0.1, deadline - time.monotonic())):
                 raise CellError(f"{what} did not appear within {timeout:.0f} s")
         self.wait_for(lambda: self.latest.get("/executor/state"), max(0.1, deadline - time.monotonic()),

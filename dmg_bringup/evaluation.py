@@ -85,21 +85,23 @@ def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, r
     """Start/goal pairs from the manipulability matrix near the grasp the cell starts from."""
     from dmg_planner.search import plan
 
-    turn_to = Rotation.from_matrix(matrix.rotations).inv() * Rotation.from_matrix(handed_over[:3, :3])
-    nearness = np.linalg.norm(matrix.positions - handed_over[:3, 3], axis=1) + 0.02 * turn_to.magnitude()
-    starts = [int(r) for r in np.argsort(nearness)
-              if plan(graph, _gripper_pose(_matrix_pose(matrix, r)), _gripper_pose(_matrix_pose(matrix, r))).success]
+    starts: list[int] = []
+    for row in np.argsort(matrix.nearness(handed_over)):
+        if len(starts) == settings.starts:
+            break
+        pose = _gripper_pose(_matrix_pose(matrix, int(row)))
+        if plan(graph, pose, pose).success:
+            starts.append(int(row))
     pairs: list[Pair] = []
-    for start_row in starts[:settings.starts]:
+    for start_row in starts:
         start = _matrix_pose(matrix, start_row)
         rows = np.flatnonzero(matrix.blocks == matrix.blocks[start_row])
         shift = np.linalg.norm(matrix.positions[rows] - start[:3, 3], axis=1)
         turn = (Rotation.from_matrix(matrix.rotations[rows]).inv() * Rotation.from_matrix(start[:3, :3])).magnitude()
         moved = (shift >= settings.min_shift) | (turn > 1e-3)
         inside = moved & (shift <= settings.max_shift) & (turn <= np.deg2rad(settings.max_turn_deg) + 1e-6)
-        candidates = rows[inside]
-        wanted = -(-settings.pairs // len(starts[:settings.starts]))
-        for row in rng.permutation(candidates)[:wanted]:
+        wanted = -(-settings.pairs // len(starts))
+        for row in rng.permutation(rows[inside])[:wanted]:
             pairs.append(Pair(start, _matrix_pose(matrix, int(row))))
     return pairs[:settings.pairs]
 

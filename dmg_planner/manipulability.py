@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial.transform import Rotation
 
 from dmg_planner.graph import DexterousManipulationGraph
 from dmg_planner.search import (GraspError, GraspFault, GripperPose, PlanResult, SearchOptions, locate_grasps, plan,
@@ -37,6 +38,12 @@ class ManipulabilityMatrix:
     @property
     def block_sizes(self) -> np.ndarray:
         return np.bincount(self.blocks)
+
+    def nearness(self, pose: np.ndarray) -> np.ndarray:
+        """How far each sampled pose is from `pose` (4x4, object frame): distance [m] + 20 mm per
+        radian of turn."""
+        turn = Rotation.from_matrix(self.rotations).inv() * Rotation.from_matrix(pose[:3, :3])
+        return np.linalg.norm(self.positions - pose[:3, 3], axis=1) + 0.02 * turn.magnitude()
 
 
 def sample_poses(graph: DexterousManipulationGraph, spacing: float, angle_count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,19 +167,15 @@ class RegraspHint:
 def regrasp_hint(graph: DexterousManipulationGraph, matrix: ManipulabilityMatrix, current: np.ndarray,
                  goal: GripperPose, options: SearchOptions = SearchOptions()) -> RegraspHint | None:
     """The block of the manipulability matrix from which `goal` is reachable, and its pose nearest
-    to the `current` grasp (4x4, object frame; distance + 20 mm per radian of turn). None when no
+    to the `current` grasp (4x4, object frame; see ManipulabilityMatrix.nearness). None when no
     sampled pose reaches the goal."""
-    from scipy.spatial.transform import Rotation
-
     try:
         goal_component = int(graph.node_component[resolve_grasp(graph, goal, 0, "goal").node])
     except GraspError:
         return None
     rows = np.flatnonzero(matrix.components == goal_component)   # the principal finger must end there
-    turn = Rotation.from_matrix(matrix.rotations[rows]).inv() * Rotation.from_matrix(current[:3, :3])
-    cost = np.linalg.norm(matrix.positions[rows] - current[:3, 3], axis=1) + 0.02 * turn.magnitude()
     tried: set[int] = set()
-    for row in rows[np.argsort(cost)]:
+    for row in rows[np.argsort(matrix.nearness(current)[rows])]:
         block = int(matrix.blocks[row])
         if block in tried:
             continue
