@@ -32,7 +32,7 @@ from dmg_executor.ects import arm_twists
 from dmg_executor.push_points import ObjectSurface, PushError, rotation_push, translation_push
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
-from dmg_executor.views import CameraModel, TagLayout, best_orientation, turns
+from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, ranked_views, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
 from dmg_planner.transforms import apply, distance, invert
 
@@ -41,6 +41,9 @@ MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
 RETRY_FACTOR = 2.0    # another push when the remaining error exceeds this many tolerances
 WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
 EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
+LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
+OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
+DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
 
 
 class Unwatched(PushError):
@@ -128,6 +131,17 @@ class _Push:
     waypoints: list[np.ndarray]   # route ending at `start`
     orientations: list[np.ndarray]   # pusher orientation wanted at each waypoint (camera on the object)
     lever: float              # m, pusher distance from the grasp axis (rotations)
+    other_views: list[np.ndarray] = field(default_factory=list)   # next best orientations at the push start
+
+
+@dataclass
+class _Look:
+    """Looking for the object from where the pusher stands: the orientations left to try, best first."""
+
+    place: np.ndarray
+    views: list[np.ndarray]
+    since: float | None = None    # when the pusher settled in the current view
+    homeward: bool = False        # all views tried: on the way back to where the run started
 
 
 def _rotation_about_axis(rotation: np.ndarray) -> float:
@@ -138,6 +152,17 @@ def _rotation_about_axis(rotation: np.ndarray) -> float:
 def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     """How far [rad] the object turned about the grasp axis from pose `reference` to `now` (holder frame)."""
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
+
+
+def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
+    """Up to OTHER_VIEWS of `orientations` (best first), each DISTINCT_VIEW from `chosen` and the others taken."""
+    taken = [chosen]
+    for orientation in orientations:
+        if len(taken) > OTHER_VIEWS:
+            break
+        if all(Rotation.from_matrix(orientation @ other.T).magnitude() >= DISTINCT_VIEW for other in taken):
+            taken.append(orientation)
+    return taken[1:]
 
 
 def _shift(twist: np.ndarray, from_point: np.ndarray, to_point: np.ndarray) -> np.ndarray:
@@ -163,6 +188,9 @@ class PlanExecutor:
         self.notes: list[str] = []      # primitives that could not be finished, and why
         self.camera, self.tags = camera, tags
         self.turns = turns(settings.tilt_limit, settings.roll_limit) if camera is not None and tags is not None else None
+        self.shape = GripperShape(settings.finger_length, settings.tip_radius, settings.hand_start, settings.hand_end,
+                                  settings.hand_radius)
+        self.waiting_since: float | None = None     # at a push start, waiting for a fresh object pose
         self.principal_finger, self.alpha = principal_finger, float(alpha)
         self.started = start_time
         self.index, self.pushes, self.step = 0, 0, Step.FIND_CONTACT
@@ -175,6 +203,9 @@ class PlanExecutor:
         self.pushed_reference: np.ndarray | None = None
         self.grip_until = -math.inf
         self.phase = ""
+        self.reference_pending = False
+        self.looking: _Look | None = None
+        self.touch_from = np.zeros(3)     # pusher in the holder's frame where a rotation push began closing its gap
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
         self.returning = False
@@ -213,12 +244,20 @@ class PlanExecutor:
     def _tick(self, obs: Observation) -> Command:
         s = self.settings
         # While the grip is closed and nothing pushes, the object cannot move: the camera may lose it
-        # for longer (the pusher's hand turns and passes the object), but never while pushing.
-        limit = s.stale_after if self.step == Step.EXECUTE else s.stale_after_held
-        if obs.object_in_holder is None or obs.time - obs.object_time > limit:
+        # for longer (the pusher's hand turns and passes the object), but never while pushing: a
+        # push whose pose goes stale stops at once with the grip closed, and the pusher backs out
+        # to look again; the run ends only when the held object stays unseen.
+        if obs.object_in_holder is None or obs.time - obs.object_time > s.stale_after_held:
             age = "never seen" if obs.object_in_holder is None else f"last seen {obs.time - obs.object_time:.2f} s ago"
-            return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {limit:.2f} s) during "
-                               f"{self.step.name} of primitive {self.index}: stopped with the object held")
+            return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
+                               f"during {self.step.name} of primitive {self.index}: stopped with the object held")
+        fresh = obs.time - obs.object_time <= s.stale_after
+        if fresh and self.reference_pending:
+            self.held_reference, self.reference_pending = obs.object_in_holder.copy(), False
+        if not fresh and self.step == Step.EXECUTE and self.phase != "tighten":
+            self.notes.append(f"a push of primitive {self.index} stopped: object unseen for "
+                              f"{obs.time - obs.object_time:.2f} s")
+            return self._tighten(obs)
         fault = self._limits(obs) or self._slip(obs)
         if fault:
             return self._abort(*fault)
@@ -233,11 +272,16 @@ class PlanExecutor:
         return handler(obs)
 
     def _enter(self, step: Step, obs: Observation) -> None:
-        """Start a step with the grip closed: from here the object must not move in it."""
+        """Start a step with the grip closed: from here the object must not move in it (from the
+        next fresh pose on, if the last one is stale: the object moved while unseen)."""
         self.step, self.step_started = step, obs.time
-        self.held_reference = obs.object_in_holder.copy()
+        self.reference_pending = obs.time - obs.object_time > self.settings.stale_after
+        self.held_reference = None if self.reference_pending else obs.object_in_holder.copy()
 
     def _find_contact(self, obs: Observation) -> Command:
+        if self.reference_pending:
+            return self._look_around(obs)     # a push was stopped unseen: plan the next one from a fresh pose
+        self.looking = None
         while self.index < len(self.primitives) and self._primitive_finished():
             self.index, self.pushes = self.index + 1, 0
             if self.index == len(self.primitives):
@@ -314,19 +358,33 @@ class PlanExecutor:
         else:
             limited = float(np.clip(self.errors[1], -s.max_push_angle, s.max_push_angle))
             # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
-            # can be beyond the fingertips or, if it fits, between the fingers towards the palm.
-            sides = (False, True) if s.push_depth + 2 * s.tip_radius + s.clearance < s.finger_length else (False,)
-            pushes, problems = [], []
-            for palm_side in sides:
-                try:
-                    pushes.append(rotation_push(self.surface, middle, holder_in_object[:3, 0],
-                                                -holder_in_object[:3, 2], -limited, s.push_depth, 0.0, palm_side))
-                except PushError as error:
-                    problems.append(str(error))
+            # goes across the fingers (beyond their tips, or between them towards the palm where that
+            # fits) or along them towards the palm beside them, each at the full lever or shorter ones
+            # where the object is small; the camera decides among those it can watch.
+            palm = -holder_in_object[:3, 2]
+            palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
+            ranked, problems = [], []
+            for along_fingers, direction in ((False, holder_in_object[:3, 1]), (False, -holder_in_object[:3, 1]),
+                                             (True, palm)):
+                for depth in s.push_depth * LEVER_SHARES:
+                    try:
+                        push = rotation_push(self.surface, middle, holder_in_object[:3, 0], direction, -limited,
+                                             depth, 0.0, s.edge_margin)
+                    except PushError as error:
+                        problems.append(str(error))
+                        continue
+                    towards_palm = float((push.point - middle) @ palm)
+                    if towards_palm >= palm_room:
+                        problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm is too far "
+                                        "between the fingers towards the palm")
+                        continue
+                    # Preferred in this order: beyond the tips, along the fingers, towards the palm; long levers first.
+                    ranked.append(((1 if along_fingers else 0 if towards_palm < 0 else 2, -depth), push))
+            pushes = [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
             if not pushes:
                 raise PushError("; ".join(problems))
         candidates = self._watched(obs, pushes)
-        return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: beyond the tips
+        return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: the longest lever beyond the tips
 
     def _watched(self, obs: Observation, pushes: list) -> list[tuple[_Push, int]]:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
@@ -360,23 +418,28 @@ class PlanExecutor:
         outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
         pusher_h = apply(to_holder, obs.pusher[:3, 3])
         waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
-        # Where the push starts, the tips must not be spread across the push line.
-        across = np.cross(direction, holder[:3, 0])
+        # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
-        start_orientation, seen = self._view(obs, provisional, level=across / np.linalg.norm(across))
-        start = point - (self._reach(direction, start_orientation) + s.gap) * direction
+        views, seen = self._views(obs, provisional, level=holder[:3, 0], occlusion=True)
+        start = point - (self._reach(direction, views[0]) + s.gap) * direction
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
-        orientations = [self._view(obs, place)[0] for place in waypoints[:-1]] + [start_orientation] * 2
-        return _Push(direction, direction_h, start, waypoints + [start], orientations, lever), seen
+        orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
+        return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
+                     _distinct(views[1:][seen[1:] > 0], views[0])), int(seen[0])
 
-    def _view(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-        """Pusher orientation at `place` that keeps the camera on the object's tags, and how many it
-        sees (without a camera model: the orientation it started in)."""
+    def _views(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None,
+               occlusion: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Pusher orientations at `place`, best view of the object's tags first, and how many tags
+        each sees (without a camera model: only the orientation it started in, seeing none).
+        `occlusion` also checks what hides tags (10x the time): for push starts, where a push
+        waits for a fresh pose; on the way there the held object may go unseen a while."""
         neutral = self.pusher_home[:3, :3]
         if self.turns is None:
-            return neutral, 0
-        return best_orientation(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral,
-                                self.turns, level)
+            return neutral[None], np.zeros(1, int)
+        occluders, scene = (Occluders.of(self.shape, obs.holder, obs.opening), self.surface.scene) if occlusion \
+            else (None, None)
+        return ranked_views(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral, self.turns,
+                            level, occluders, scene)
 
     def _home_in(self, holder: np.ndarray) -> np.ndarray:
         """Where the pusher started (its camera's vantage point), in the holder's frame."""
@@ -391,7 +454,8 @@ class PlanExecutor:
         command = self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
         if self._arrived(obs):
             if self.waypoint == len(self.push.waypoints) - 1 and obs.time - obs.object_time > self.settings.stale_after:
-                return Command()     # at the push start: wait for a fresh pose before loosening the grip
+                return self._look_again(obs)     # at the push start: no push before a fresh pose
+            self.waiting_since = None
             self.waypoint += 1
             if self.waypoint == len(self.push.waypoints):
                 self._enter(Step.EXECUTE, obs)
@@ -400,20 +464,69 @@ class PlanExecutor:
                 return Command(holder_grip=self._loosened(obs))
         return command
 
+    def _look_around(self, obs: Observation) -> Command:
+        """Turn the pusher where it stands through its best views of the object's last seen pose (it
+        is held: it has not moved since), each for `stale_after`, until the camera finds it; after
+        the last, go back to where the run started, where the camera saw it first."""
+        if self.looking is None:
+            place = obs.pusher[:3, 3].copy()
+            views, seen = self._views(obs, place, occlusion=True)
+            self.looking = _Look(place, [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0]))
+        look = self.looking
+        if look.homeward:
+            if self._arrived(obs) and self.waypoint < len(self.push.waypoints) - 1:
+                self.waypoint += 1
+            return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+        command = self._go_to(obs, look.place, look.views[0])
+        if Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude() < WAYPOINT_TURN_TOLERANCE:
+            if look.since is None:
+                look.since = obs.time
+            elif obs.time - look.since > self.settings.stale_after:
+                look.views.pop(0)
+                look.since = None
+                if not look.views:
+                    try:
+                        self._head_home(obs)
+                        look.homeward = True
+                    except RouteError:
+                        look.views.append(obs.pusher[:3, :3].copy())   # nowhere to go: wait here
+        return command
+
+    def _look_again(self, obs: Observation) -> Command:
+        """Wait at the push start for a fresh pose; when none comes within `stale_after`, turn the
+        pusher to the next best view (the view model missed something that hides the tags)."""
+        if self.waiting_since is None:
+            self.waiting_since = obs.time
+        elif obs.time - self.waiting_since > self.settings.stale_after and self.push.other_views:
+            self.push.orientations[-1] = self.push.other_views.pop(0)
+            self.waiting_since = None
+        return Command()
+
     def _execute(self, obs: Observation) -> Command:
         s = self.settings
+        primitive = self.primitives[self.index]
         if self.phase == "loosen":
             if obs.time < self.grip_until:
                 return Command(holder_grip=self._loosened(obs))
             self.phase, self.held_reference = "push", None
             self.pushed_reference = obs.object_in_holder.copy()
+            if primitive.kind == PrimitiveKind.ROTATION:
+                # Close the gap along the push line first: turning from `gap` away, the pusher would
+                # mostly slide past the face (its arc is tangent to the face, not into it).
+                self.phase, self.touch_from = "touch", apply(invert(obs.holder), obs.pusher[:3, 3])
+        if self.phase == "touch":
+            closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.touch_from) @ self.push.local_direction)
+            if closed < s.gap:
+                command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
+                command.holder_grip = self._loosened(obs)
+                return command
+            self.phase = "push"
         if self.phase == "tighten":
             if obs.time < self.grip_until:
                 return Command()
             self.pushes += 1
             self._enter(Step.LEAVE, obs)
             return Command()
-        primitive = self.primitives[self.index]
         holder = obs.holder
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
@@ -472,24 +585,27 @@ class PlanExecutor:
         return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.tip_radius, 2 * s.tip_radius,
                         s.clearance)
 
+    def _head_home(self, obs: Observation) -> None:
+        """Route the pusher back to where it started (RouteError if there is none)."""
+        box = self._keep_out(obs)
+        to_holder = invert(obs.holder)
+        local = [apply(to_holder, p) for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+        local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
+        places = [apply(obs.holder, w) for w in route(local[0], local[1], box, local[1])]
+        orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
+        self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
+        self.waypoint = 0
+
     def _finish_plan(self, obs: Observation) -> Command:
         """All primitives done: the pusher goes back to where it started, then the result."""
         if not self.returning:
             self.returning = True
             self.step, self.step_started = Step.LEAVE, obs.time
             self.held_reference = obs.object_in_holder.copy()
-            box = self._keep_out(obs)
-            to_holder = invert(obs.holder)
-            local = [apply(to_holder, p) for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
-            local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
             try:
-                waypoints = route(local[0], local[1], box, local[1])
+                self._head_home(obs)
             except RouteError as error:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"cannot return the pusher: {error}")
-            places = [apply(obs.holder, w) for w in waypoints]
-            orientations = [self._view(obs, place)[0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
-            self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
-            self.waypoint = 0
         if self._arrived(obs):
             self.waypoint += 1
             if self.waypoint == len(self.push.waypoints):

@@ -5,9 +5,9 @@ displacement over the object, so the object has to move by -t relative to the ho
 gripper: the pusher touches the face through which the line from the contact along +t
 leaves the object, and pushes towards -t. A ROTATION r turns the finger by r about the
 outward contact normal n, so the object has to turn by -r about n relative to the gripper,
-about the grasp axis: the pusher touches the object on a line orthogonal to the finger and
-to the grasp axis, `depth` away from the grasp axis along the finger (beyond the fingertips,
-where the object is free), on the side whose push turns the object the right way.
+about the grasp axis: the pusher touches the object on a line orthogonal to the grasp axis,
+`depth` beside it (the paper: across the finger, beyond the fingertips, where the object is
+free), on the side whose push turns the object the right way.
 """
 from __future__ import annotations
 
@@ -72,11 +72,20 @@ def _unit(vector, what: str) -> np.ndarray:
     return vector / norm
 
 
-def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, what: str) -> PushPoint:
+def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, what: str,
+             sides: np.ndarray = np.zeros((0, 3))) -> PushPoint:
+    """The push point where the line meets the object, if the face there takes a push: not too
+    slanted, and still there (within a 45 deg slope) at each of `sides` off the line, so the
+    pusher does not slide off an edge."""
     hit = surface.entry(target, direction)
     if hit is None:
         raise PushError(f"{what}: the push line misses the object")
     point, normal = hit
+    for side in sides:
+        beside = surface.entry(point + side, direction)
+        if beside is None or abs(float((beside[0] - point - side) @ direction)) > np.linalg.norm(side) + 1e-6:
+            raise PushError(f"{what}: the push at {np.round(point * 1000, 1).tolist()} mm is within "
+                            f"{np.linalg.norm(side) * 1000:.0f} mm of the face's edge")
     slant = np.rad2deg(np.arccos(np.clip(-normal @ direction, -1.0, 1.0)))
     if slant > SLANT_LIMIT_DEG:
         raise PushError(f"{what}: the face at {np.round(point * 1000, 1).tolist()} mm is slanted {slant:.0f} deg "
@@ -91,25 +100,25 @@ def translation_push(surface: ObjectSurface, contact, translation) -> PushPoint:
     return _checked(surface, np.asarray(contact, float), -along, "translation")
 
 
-def rotation_push(surface: ObjectSurface, contact, outward_normal, towards_palm, angle: float,
-                  depth: float, inset: float, palm_side: bool = False) -> PushPoint:
-    """Push point for a ROTATION of the finger by `angle` about the outward contact normal.
+def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,
+                  inset: float, edge_margin: float = 0.0) -> PushPoint:
+    """Push point for a ROTATION of the finger by `angle` about the outward contact normal n,
+    the pusher moving along `direction` u (made orthogonal to n).
 
-    `towards_palm`: direction from the contact along the finger to the palm (object frame).
-    The push line runs `inset` below the contact face (inside the object, not grazing it)
-    and `depth` from the contact along the finger: beyond it, away from the palm (the paper's
-    choice, a lever where the object is free), or with `palm_side` between the fingers towards
-    the palm, which turns the object the same way from the opposite side.
+    The object has to turn by -angle about n. A push along u on a line `depth` beside the
+    contact, along n x u, gives the torque (depth n x u) x u = -depth n, so the side is set by
+    the angle's sign. The line runs `inset` below the contact face (inside the object, not
+    grazing it). The paper pushes across the finger beyond its tip (u across the finger, the
+    lever along it, away from the palm, where the object is free); across it towards the palm
+    or along the finger beside it turns the object the same way from other sides. The face must
+    reach `edge_margin` beyond the push line both ways along the lever: turning, the pusher
+    moves that way on it.
     """
     normal = _unit(outward_normal, "contact normal")
-    palm = _unit(towards_palm - (towards_palm @ normal) * normal, "finger direction")
+    along = _unit(np.asarray(direction, float) - (np.asarray(direction, float) @ normal) * normal, "push direction")
     if not np.isfinite(angle) or abs(angle) < 1e-9:
         raise PushError(f"rotation angle {angle} is not a rotation")
-    sideways = np.cross(normal, palm)
-    lever = depth if palm_side else -depth        # along `palm`
-    # Pushing at contact + lever*palm along -side*sideways gives a torque about the normal of
-    # (lever*palm) x (-side*sideways) = -lever*side*normal (the inset along the normal adds none).
-    # The object must turn by -angle about the normal.
-    side = np.sign(angle) * np.sign(lever)
-    target = np.asarray(contact, float) + lever * palm - inset * normal
-    return _checked(surface, target, -side * sideways, "rotation")
+    lever = np.sign(angle) * depth * np.cross(normal, along)
+    target = np.asarray(contact, float) + lever - inset * normal
+    sideways = edge_margin * np.cross(normal, along)
+    return _checked(surface, target, along, "rotation", np.array([sideways, -sideways]))

@@ -32,7 +32,11 @@ class ExecutorSettings:
     clearance: float
     gap: float
     push_depth: float
+    edge_margin: float
     finger_length: float
+    hand_start: float
+    hand_end: float
+    hand_radius: float
     max_push_angle: float          # rad
     hold_force: float
     slide_force: float

@@ -4,16 +4,23 @@ The camera rides on the pushing gripper, about 85 mm behind and 40 mm beside the
 Where the fingertips must be is fixed by the push; how the hand is turned about them is
 free within the arm's comfortable range. For each place the pusher goes, every orientation
 on a grid - tilts of the finger axis up to `tilt_limit`, rolls about it up to `roll_limit`,
-from the orientation the pusher started in - is scored by projecting the object's tag
-corners into the camera: most tags wholly in the image and facing the camera wins, ties go
-to tags nearer the image centre, then to the smaller turn. Rolling matters: it swings the
-camera's offset round the fingers, towards the side the tags are on.
+from the orientation the pusher started in - is scored by projecting the object's tags
+into the camera: most tags wholly in the image, facing the camera and hidden by nothing
+wins, ties go to tags nearer the image centre, then to the smaller turn. Rolling matters:
+it swings the camera's offset round the fingers, towards the side the tags are on.
+
+What can hide a tag: the object itself (rays cast on its mesh), the holding gripper's
+fingers and hand, and the pusher's own fingertips, which sit in front of its camera (a
+tag behind them is lost, and a black fingertip touching a tag's black border bends the
+detected square). The grippers are modelled as spheres; a tag counts only if the rays
+to a grid of points over it and its white margin pass clear of all of them.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import open3d as o3d
 from scipy.spatial.transform import Rotation
 
 from dmg_perception.tags import tag_corners, tag_pose
@@ -24,6 +31,8 @@ EDGE_MARGIN = 30.0                   # px a tag corner must keep from the image 
 FACING_COSINE = np.cos(np.deg2rad(70.0))   # a tag seen more edge-on than this is not counted
 LEVEL_SINE = np.sin(np.deg2rad(15.0))   # fingertip axis across a push line: at most this far off
 NEAREST = 0.04                       # m; closer to the camera than this is not in view
+MARGIN_SCALE = 1.25                  # the tag's white margin: one cell of the 8 across its black square
+SURFACE_SLACK = 0.002                # m; a ray hitting the object this close before a tag point reaches it
 
 
 @dataclass
@@ -45,6 +54,50 @@ class TagLayout:
         normals = np.array([tag_pose(tag)[0][:, 2] for tag in model.apriltags]).reshape(-1, 3)
         return cls(corners, normals)
 
+    def samples(self) -> np.ndarray:
+        """(tags, 9, 3): a 3x3 grid over each tag with its white margin, the points that must be unhidden."""
+        centres = self.corners.mean(axis=1, keepdims=True)
+        corners = centres + MARGIN_SCALE * (self.corners - centres)
+        edges = (corners + np.roll(corners, -1, axis=1)) / 2
+        return np.concatenate([corners, edges, centres], axis=1)
+
+
+@dataclass(frozen=True)
+class GripperShape:
+    """A parallel gripper as spheres in its grasp frame (z along the fingers, origin between the tips)."""
+
+    finger_length: float       # m, palm to fingertip centre
+    tip_radius: float          # m
+    hand_start: float          # m behind the fingertips where the hand (wrist) begins, on the finger axis
+    hand_end: float            # m behind the fingertips where the modelled hand ends
+    hand_radius: float         # m
+
+    def spheres(self, opening: float, with_hand: bool = True) -> np.ndarray:
+        """(k, 4) centres and radii covering both fingers (`opening` apart) and, if asked, the hand."""
+        finger_radius = 1.25 * self.tip_radius           # the finger's box and a margin for pose error
+        along = np.arange(0.0, self.finger_length - self.tip_radius + 1e-9, finger_radius)
+        spheres = [np.column_stack([np.full_like(along, side * (opening / 2 + self.tip_radius)), np.zeros_like(along),
+                                    -along, np.full_like(along, finger_radius)]) for side in (-1.0, 1.0)]
+        if with_hand and self.hand_radius > 0 and self.hand_end > self.hand_start:
+            along = np.arange(self.hand_start, self.hand_end + 1e-9, 0.75 * self.hand_radius)
+            spheres.append(np.column_stack([np.zeros((len(along), 2)), -along, np.full_like(along, self.hand_radius)]))
+        return np.vstack(spheres)
+
+
+@dataclass
+class Occluders:
+    """Spheres that can hide tags: `fixed` in the base frame (the holding gripper), `riding` in the
+    pusher's grasp frame (its own fingers, always at the same place in its camera's image)."""
+
+    fixed: np.ndarray          # (k, 4) centre, radius
+    riding: np.ndarray         # (j, 4)
+
+    @classmethod
+    def of(cls, shape: GripperShape, holder: np.ndarray, holder_opening: float) -> "Occluders":
+        held = shape.spheres(holder_opening)
+        fixed = np.column_stack([held[:, :3] @ holder[:3, :3].T + holder[:3, 3], held[:, 3]])
+        return cls(fixed, shape.spheres(0.0, with_hand=False))
+
 
 def turns(tilt_limit: float, roll_limit: float) -> np.ndarray:
     """(n, 3, 3) rotations in the pusher's own frame: a tilt of the finger axis (z), then a roll about it."""
@@ -57,13 +110,35 @@ def turns(tilt_limit: float, roll_limit: float) -> np.ndarray:
     return (tilt * roll).as_matrix()
 
 
+def _hidden_by_spheres(cameras: np.ndarray, points: np.ndarray, spheres: np.ndarray) -> np.ndarray:
+    """(n, p): does a sphere (n, k, 4) cut the segment from camera n (n, 3) to point p (p, 3)?"""
+    ray = points[None] - cameras[:, None]                                        # (n, p, 3)
+    to_centre = spheres[..., :3] - cameras[:, None]                               # (n, k, 3)
+    dot = ray @ to_centre.transpose(0, 2, 1)                                      # (n, p, k)
+    length2 = np.einsum("npd,npd->np", ray, ray)[..., None]
+    along = np.clip(dot / length2, 0.0, 1.0)                                      # closest point on the segment
+    gap2 = np.einsum("nkd,nkd->nk", to_centre, to_centre)[:, None] - 2 * along * dot + along**2 * length2
+    return (gap2 < spheres[:, None, :, 3] ** 2).any(axis=2)
+
+
+def _hidden_by_object(scene: o3d.t.geometry.RaycastingScene, cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n, p): does the object (its mesh, object frame) stand between camera n and its own point p?"""
+    ray = points[None] - cameras[:, None]
+    rays = np.concatenate([np.broadcast_to(cameras[:, None], ray.shape), ray], axis=2).reshape(-1, 6)
+    hit = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy().reshape(ray.shape[:2])
+    return hit < 1.0 - SURFACE_SLACK / np.linalg.norm(ray, axis=2)
+
+
 def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
-               orientations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+               orientations: np.ndarray, occluders: Occluders | None = None,
+               scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[np.ndarray, np.ndarray]:
     """For pusher orientations (n, 3, 3) with the grasp frame at `tip` (base frame): the number of
-    tags wholly in view and facing the camera, and their mean distance from the image centre [px]."""
-    corners = tags.corners.reshape(-1, 3) @ object_pose[:3, :3].T + object_pose[:3, 3]       # (4t, 3)
-    normals = tags.normals @ object_pose[:3, :3].T
-    centres = tags.corners.mean(axis=1) @ object_pose[:3, :3].T + object_pose[:3, 3]
+    tags wholly in view, facing the camera and (given the occluders and the object's ray casting
+    scene) hidden by nothing, and their mean distance from the image centre [px]."""
+    rotation, origin = object_pose[:3, :3], object_pose[:3, 3]
+    corners = tags.corners.reshape(-1, 3) @ rotation.T + origin                                # (4t, 3)
+    normals = tags.normals @ rotation.T
+    centres = tags.corners.mean(axis=1) @ rotation.T + origin
     optical = orientations @ camera.in_pusher[:3, :3]                                          # (n, 3, 3)
     position = tip + orientations @ camera.in_pusher[:3, 3]                                   # (n, 3)
     local = np.einsum("nji,nkj->nki", optical, corners[None] - position[:, None])             # (n, 4t, 3)
@@ -77,20 +152,39 @@ def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, ti
     towards = position[:, None] - centres[None]
     facing = np.einsum("ntk,tk->nt", towards, normals) > FACING_COSINE * np.linalg.norm(towards, axis=2)
     seen = inside & facing
+    rows = np.flatnonzero(seen.any(axis=1))
+    if len(rows) and (occluders is not None or scene is not None):
+        samples = tags.samples()
+        count = samples.shape[1]
+        hidden = np.zeros((len(rows), samples.shape[0] * count), bool)
+        if occluders is not None:
+            riding = np.concatenate([np.einsum("nij,kj->nki", orientations[rows], occluders.riding[:, :3]) + tip,
+                                     np.broadcast_to(occluders.riding[:, 3:], (len(rows), *occluders.riding[:, 3:].shape))],
+                                    axis=2)
+            spheres = np.concatenate([np.broadcast_to(occluders.fixed, (len(rows), *occluders.fixed.shape)), riding], axis=1)
+            hidden |= _hidden_by_spheres(position[rows], samples.reshape(-1, 3) @ rotation.T + origin, spheres)
+        if scene is not None:
+            cameras = (position[rows] - origin) @ rotation                                   # object frame
+            hidden |= _hidden_by_object(scene, cameras, samples.reshape(-1, 3))
+        seen[rows] &= ~hidden.reshape(len(rows), -1, count).any(axis=2)
     off_centre = np.hypot(u - camera.intrinsics[0, 2], v - camera.intrinsics[1, 2]).reshape(len(orientations), -1, 4)
     off_centre = off_centre.mean(axis=2)
     mean_off = np.where(seen.any(axis=1), (off_centre * seen).sum(axis=1) / np.maximum(seen.sum(axis=1), 1), np.inf)
     return seen.sum(axis=1), mean_off
 
 
-def best_orientation(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
-                     neutral: np.ndarray, candidates: np.ndarray, level: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """The pusher orientation (3x3) among `neutral` @ candidates that sees the object best with its
-    grasp frame at `tip`, and how many tags it sees.
+def ranked_views(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
+                 neutral: np.ndarray, candidates: np.ndarray, level: np.ndarray | None = None,
+                 occluders: Occluders | None = None,
+                 scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pusher orientations (m, 3, 3) among `neutral` @ candidates with the grasp frame at `tip`, best
+    view first, and how many tags each sees.
 
     `level`: a direction the pusher's two fingertips must not be spread along (their axis is
-    its x). Pushing with the tips spread across the push line, one tip touches first, off the
-    line, and turns the object.
+    its x), the grasp axis. Tips spread along it touch the object off the grasp's middle - the
+    leading one first, as the hand is never exactly square to the face - and twist the object
+    out of the grasp (measured: 5.6 deg about the finger axis over a 3 mm push); tips in a
+    plane across it push in line with the grasp.
     """
     orientations = neutral @ candidates
     turn = np.linalg.norm(Rotation.from_matrix(candidates).as_rotvec(), axis=1)
@@ -98,6 +192,6 @@ def best_orientation(camera: CameraModel, tags: TagLayout, object_pose: np.ndarr
         keep = np.abs(orientations[:, :, 0] @ level) < LEVEL_SINE
         if keep.any():
             orientations, turn = orientations[keep], turn[keep]
-    count, off_centre = view_score(camera, tags, object_pose, tip, orientations)
-    best = np.lexsort((turn, np.round(off_centre / 20.0), -count))[0]
-    return orientations[best], int(count[best])
+    count, off_centre = view_score(camera, tags, object_pose, tip, orientations, occluders, scene)
+    order = np.lexsort((turn, np.round(off_centre / 20.0), -count))
+    return orientations[order], count[order]

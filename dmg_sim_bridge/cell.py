@@ -280,22 +280,32 @@ class Cell:
     # --- reset ----------------------------------------------------------------------------
     def solve_arm(self, role: str, target: np.ndarray) -> np.ndarray:
         """Joint angles putting gripper `role`'s frame at `target`: of the solutions from a few
-        seeds around ik_seed, the one farthest from any joint limit."""
+        seeds around ik_seed, each also with the wrist flipped (w0 half a turn on, w1 mirrored),
+        those leaving the wrist roll `wrist_roll_room` to either side first, then the one
+        farthest from any joint limit."""
         arm = self.arms[role]
         key = (role, target.tobytes())
         if key in self._solutions:
             return self._solutions[key]
         solutions, failure = [], None
         for offset in IK_WRIST_SEEDS:
-            seed = self.config.ik_seed.copy()
-            seed[-1] += offset
-            try:
-                solutions.append(self._inverse_kinematics(arm, target, seed))
-            except CellError as error:
-                failure = error
+            for flipped in (False, True):
+                seed = self.config.ik_seed.copy()
+                seed[-1] += offset
+                if flipped:
+                    seed[4], seed[5] = seed[4] + np.pi, -seed[5]
+                try:
+                    solutions.append(self._inverse_kinematics(arm, target, seed))
+                except CellError as error:
+                    failure = error
         if not solutions:
             raise failure
-        self._solutions[key] = max(solutions, key=lambda q: np.min(np.minimum(q - arm.lower, arm.upper - q)))
+
+        def preference(q: np.ndarray) -> tuple[bool, float]:
+            margins = np.minimum(q - arm.lower, arm.upper - q)
+            return bool(margins[-1] >= self.config.wrist_roll_room[role]), float(margins.min())
+
+        self._solutions[key] = max(solutions, key=preference)
         return self._solutions[key]
 
     def _inverse_kinematics(self, arm: Arm, target: np.ndarray, seed: np.ndarray) -> np.ndarray:

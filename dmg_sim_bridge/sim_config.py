@@ -54,6 +54,7 @@ class SimConfig:
     arms: dict[str, str]             # role -> Baxter side
     home: dict[str, np.ndarray]      # role -> 4x4 grasp-frame pose in the base frame
     ik_seed: np.ndarray
+    wrist_roll_room: dict[str, float]   # role -> rad
     object: str
     settle_time: float
     settle_position_tolerance: float
@@ -92,6 +93,7 @@ def load_sim_config(path: Path | None = None) -> SimConfig:
     return SimConfig(
         document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**document["control"]),
         camera=camera, arms=arms, home={role: _pose(document["home"][role]) for role in ARM_ROLES},
-        ik_seed=np.asarray(document["ik_seed"], float), object=str(document["object"]),
+        ik_seed=np.asarray(document["ik_seed"], float), wrist_roll_room={role: float(document["wrist_roll_room"][role]) for role in ARM_ROLES},
+        object=str(document["object"]),
         settle_time=float(document["settle_time"]), settle_position_tolerance=float(tolerance["position"]),
         settle_angle_tolerance=float(np.deg2rad(tolerance["angle_deg"])))

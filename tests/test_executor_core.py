@@ -56,13 +56,14 @@ def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surfa
     from dmg_executor.push_points import rotation_push
 
     # Finger on the top face (outward normal +z) pointing to the palm along -x.
-    contact, normal, palm = np.array([0.0, 0.0, 0.02]), np.array([0, 0, 1.0]), np.array([-1.0, 0, 0])
+    contact, normal = np.array([0.0, 0.0, 0.02]), np.array([0, 0, 1.0])
     for angle in (0.4, -0.4):
-        for palm_side, lever in ((False, 0.03), (True, -0.03)):
-            push = rotation_push(box_surface, contact, normal, palm, angle, depth=0.03, inset=0.005,
-                                 palm_side=palm_side)
-            assert push.point[0] == pytest.approx(lever) and push.point[2] == pytest.approx(0.015)
-            assert abs(push.point[1]) == pytest.approx(0.03)          # on a +-y side face
+        # Across the finger (the paper's push, on a +-y face) and along it (on the +-x end).
+        for direction, face_axis in (([0, 1.0, 0], 1), ([0, -1.0, 0], 1), ([-1.0, 0, 0], 0)):
+            push = rotation_push(box_surface, contact, normal, direction, angle, depth=0.02, inset=0.005)
+            lever = np.cross(normal, push.direction) @ (push.point - contact)
+            assert abs(lever) == pytest.approx(0.02) and push.point[2] == pytest.approx(0.015)
+            assert abs(push.point[face_axis]) == pytest.approx((0.05, 0.03)[face_axis])   # on the face it enters
             torque = np.cross(push.point - contact, push.direction) @ normal   # about the outward normal
             assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
 
@@ -75,7 +76,13 @@ def test_push_points_that_do_not_exist_are_refused(box_surface):
     with pytest.raises(PushError, match="no direction"):
         translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0])
     with pytest.raises(PushError, match="not a rotation"):
-        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [-1, 0, 0], 0.0, depth=0.03, inset=0.005)
+        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [0, 1, 0], 0.0, depth=0.03, inset=0.005)
+    # Along the finger 20 mm beside it, the +-x end face (60 mm wide) has 10 mm left beyond the push line.
+    along = dict(contact=[0, 0, 0.02], outward_normal=[0, 0, 1], direction=[-1.0, 0, 0], angle=0.4, depth=0.02,
+                 inset=0.005)
+    assert rotation_push(box_surface, **along, edge_margin=0.008).point[0] == pytest.approx(0.05)
+    with pytest.raises(PushError, match="within 12 mm of the face's edge"):
+        rotation_push(box_surface, **along, edge_margin=0.012)
 
 
 # --- routes round the object -------------------------------------------------------------------
@@ -100,7 +107,7 @@ def test_routes_go_round_the_keep_out_box_and_prefer_the_near_side():
 
 
 def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_would_not():
-    from dmg_executor.views import CameraModel, TagLayout, best_orientation, turns, view_score
+    from dmg_executor.views import CameraModel, TagLayout, ranked_views, turns, view_score
     from dmg_planner.objects import load_object
 
     # Camera 85 mm behind and 38 mm beside the fingertips, looking along them (the sim's hand camera).
@@ -114,10 +121,45 @@ def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_woul
     home = np.column_stack([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).astype(float)
     below = np.array([0.0, 0.0, -0.065])                  # under the box, where a push upwards starts
     seen_home, _ = view_score(camera, tags, object_pose, below, home[None])
-    orientation, seen = best_orientation(camera, tags, object_pose, below, home, turns(np.deg2rad(30), np.deg2rad(90)))
-    assert seen_home[0] == 0 and seen >= 1
-    tilt = np.rad2deg(np.arccos(np.clip(orientation[:, 2] @ home[:, 2], -1, 1)))
+    orientations, seen = ranked_views(camera, tags, object_pose, below, home, turns(np.deg2rad(30), np.deg2rad(90)))
+    assert seen_home[0] == 0 and seen[0] >= 1 and np.all(np.diff(seen) <= 0)   # best first
+    tilt = np.rad2deg(np.arccos(np.clip(orientations[0][:, 2] @ home[:, 2], -1, 1)))
     assert 0 < tilt <= 30 + 1e-6                          # it had to turn the fingers, within the limit
+
+
+def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
+    import open3d as o3d
+
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, view_score
+
+    # One 24 mm tag at the origin facing -z; the camera 20 cm in front of it, looking at it along +z.
+    half = 0.012
+    tags = TagLayout(np.array([[[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]]]),
+                     np.array([[0.0, 0.0, -1.0]]))
+    camera = CameraModel(np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]]), 640, 480, np.eye(4))
+    tip, looking = np.array([0.0, 0.0, -0.2]), np.eye(3)[None]
+
+    def seen(occluders=None, scene=None) -> int:
+        return int(view_score(camera, tags, np.eye(4), tip, looking, occluders, scene)[0][0])
+
+    none = np.zeros((0, 4))
+    assert seen() == 1 and seen(Occluders(none, none)) == 1
+    assert seen(Occluders(np.array([[0.0, 0.005, -0.1, 0.01]]), none)) == 0        # a finger halfway
+    assert seen(Occluders(np.array([[0.05, 0.0, -0.1, 0.01]]), none)) == 1         # beside the line of sight
+    assert seen(Occluders(none, np.array([[0.0, 0.0, 0.1, 0.01]]))) == 0           # the pusher's own fingertip
+    # A holding gripper whose finger hangs in front of the tag, and one whose fingers are far apart.
+    shape = GripperShape(finger_length=0.075, tip_radius=0.008, hand_start=0.1, hand_end=0.33, hand_radius=0.045)
+    holder = np.eye(4)
+    holder[:3, :3] = np.column_stack([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])   # fingers along +y, 3 cm before the tag
+    holder[:3, 3] = [0.0, 0.03, -0.03]
+    assert seen(Occluders(Occluders.of(shape, holder, 0.0).fixed, none)) == 0
+    assert seen(Occluders(Occluders.of(shape, holder, 0.08).fixed, none)) == 1
+    # The object itself: a block of it standing between the camera and the tag, then beside the line of sight.
+    block = o3d.geometry.TriangleMesh.create_box(0.02, 0.02, 0.01)
+    for offset, expected in (([-0.01, -0.01, -0.05], 0), ([0.04, -0.01, -0.05], 1)):
+        vertices = np.asarray(block.vertices) + offset
+        assert seen(scene=ObjectSurface(vertices, np.asarray(block.triangles)).scene) == expected
 
 
 # --- the whole loop in one process: real MuJoCo, real rendering and tag detection --------------
@@ -219,3 +261,34 @@ def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loo
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
     cell.run(0.3)                                   # the arms' watchdog has stopped them
     assert np.abs(cell.joint_state().velocity).max() < 0.01
+
+
+def test_a_push_that_loses_sight_of_the_object_stops_held_and_the_run_goes_on_once_it_is_seen(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+
+    def tick(perceive: bool = True) -> None:
+        if perceive:
+            loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done:
+        tick()
+    for _ in range(25):                          # half a second into the push
+        tick()
+    pushing_from = cell.object_in_gripper("arm1")
+    covered_until = cell.time + 1.5 * executor.settings.stale_after
+    while cell.time < covered_until:             # the camera sees nothing (a lens cap)
+        tick(perceive=False)
+    assert not executor.done and executor.step.name != "EXECUTE" or executor.phase == "tighten"
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    held = cell.object_in_gripper("arm1")
+    assert distance(pushing_from, held)[0] < 0.012       # it stopped pushing within the stale limit
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert "stopped: object unseen" in outcome.message
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003

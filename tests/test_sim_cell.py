@@ -100,6 +100,21 @@ def push_from_below(cell: Cell, lateral_offset: float, gap: float, travel: float
     return before, cell.object_in_gripper("arm1")
 
 
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_the_pushing_hand_rolls_90_deg_either_way_about_its_fingers_from_home(cell, direction):
+    # The executor rolls the camera hand up to 90 deg to keep the tags in view: home leaves the wrist room for it.
+    cell.reset()
+    start = cell.grasp_pose("arm2")
+    rate = 0.5
+    for _ in range(int(np.pi / 2 / rate / 0.01)):
+        cell.command_twist("arm2", np.zeros(3), direction * rate * cell.grasp_pose("arm2")[:3, 2])
+        cell.run(0.01)
+    cell.stop("arm2")
+    cell.run(0.1)
+    moved, turned = distance(start, cell.grasp_pose("arm2"))
+    assert np.rad2deg(turned) > 85.0 and moved < 0.003
+
+
 def test_push_with_loosened_grip_translates_the_object_by_the_pushed_distance(cell):
     gap, travel = 0.01, 0.03
     before, after = push_from_below(cell, lateral_offset=0.0, gap=gap, travel=travel, grip=2.0)
