@@ -29,10 +29,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists
-from dmg_executor.push_points import ObjectSurface, PushError, rotation_push, translation_push
+from dmg_executor.push_points import ObjectSurface, PushError, exit_normals, rotation_push, translation_push
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
-from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, ranked_views, turns
+from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, overlap, placed, ranked_views, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
 from dmg_planner.transforms import apply, distance, invert
 
@@ -44,6 +44,8 @@ EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
+FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
+DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
 
 
 class Unwatched(PushError):
@@ -340,10 +342,12 @@ class PlanExecutor:
         holder_in_object = invert(obs.object_in_holder)
         middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
         if primitive.kind == PrimitiveKind.TRANSLATION:
-            # Along the remaining motion (holder frame), or along one of its components across the grasp
-            # axis when the camera cannot watch that push (it would need the pusher behind the object).
+            # Along the remaining motion (holder frame) where the face there is square to it; else, or
+            # when the camera cannot watch that push (it would need the pusher behind the object),
+            # square onto another face round the grasp axis, up to DETOUR_LIMIT off the motion: such a
+            # push goes as far as the motion's share along it, the next one takes the rest.
             motion = self._remaining_motion(obs)
-            directions = [motion] + [motion[k] * np.eye(3)[k] for k in (1, 2) if abs(motion[k]) > s.position_tolerance]
+            directions = [motion] + self._square_pushes(obs, motion)
             pushes, problems = [], []
             for direction in directions:
                 try:   # the contact moves over the object opposite to the object's motion
@@ -386,6 +390,21 @@ class PlanExecutor:
         candidates = self._watched(obs, pushes)
         return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: the longest lever beyond the tips
 
+    def _square_pushes(self, obs: Observation, motion: np.ndarray) -> list[np.ndarray]:
+        """Directions (holder frame, across the grasp axis) square onto the object's faces round the
+        grasp, within DETOUR_LIMIT of `motion`: pushing along one slides the object without turning it."""
+        angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
+        rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
+        in_object = invert(obs.object_in_holder)
+        normals = exit_normals(self.surface, in_object[:3, 3], rays @ in_object[:3, :3].T)
+        pushes = -(normals[np.isfinite(normals).all(axis=1)] @ obs.object_in_holder[:3, :3].T)
+        pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
+        lengths = np.linalg.norm(pushes, axis=1)
+        pushes = pushes[lengths > 0.5] / lengths[lengths > 0.5, None]
+        pushes = pushes[np.unique(np.round(pushes, 2), axis=0, return_index=True)[1]]
+        wanted = pushes @ motion / max(float(np.linalg.norm(motion)), 1e-12) >= np.cos(DETOUR_LIMIT)
+        return list(pushes[wanted])
+
     def _watched(self, obs: Observation, pushes: list) -> list[tuple[_Push, int]]:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
         candidates, problems = [], []
@@ -420,15 +439,29 @@ class PlanExecutor:
         waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
-        views, seen = self._views(obs, provisional, level=holder[:3, 0], occlusion=True)
+        views, seen = self._views(obs, provisional, level=holder[:3, 0], occlusion=True, in_line=direction)
         start = point - (self._reach(direction, views[0]) + s.gap) * direction
+        if self._hands_clash(obs, start, views[0]):
+            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
+                             "would put the pusher's hand into the holding gripper")
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
                      _distinct(views[1:][seen[1:] > 0], views[0])), int(seen[0])
 
+    def _hands_clash(self, obs: Observation, place: np.ndarray, orientation: np.ndarray) -> bool:
+        """Would the pusher with its tips at `place`, turned `orientation`, have its hand in the holding
+        gripper or its fingers in that gripper's hand? (The arms do not collide in the simulation;
+        they would on the robot.) Fingers near fingers are the keep-out box's business."""
+        pusher = np.eye(4)
+        pusher[:3, :3], pusher[:3, 3] = orientation, place
+        holder_hand = placed(self.shape.hand(), obs.holder)
+        return (overlap(placed(self.shape.hand(), pusher), np.vstack([holder_hand,
+                                                                     placed(self.shape.fingers(obs.opening), obs.holder)]))
+                or overlap(placed(self.shape.fingers(0.0), pusher), holder_hand))
+
     def _views(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None,
-               occlusion: bool = False) -> tuple[np.ndarray, np.ndarray]:
+               occlusion: bool = False, in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Pusher orientations at `place`, best view of the object's tags first, and how many tags
         each sees (without a camera model: only the orientation it started in, seeing none).
         `occlusion` also checks what hides tags (10x the time): for push starts, where a push
@@ -439,7 +472,7 @@ class PlanExecutor:
         occluders, scene = (Occluders.of(self.shape, obs.holder, obs.opening), self.surface.scene) if occlusion \
             else (None, None)
         return ranked_views(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral, self.turns,
-                            level, occluders, scene)
+                            level, occluders, scene, in_line)
 
     def _home_in(self, holder: np.ndarray) -> np.ndarray:
         """Where the pusher started (its camera's vantage point), in the holder's frame."""

@@ -17,6 +17,9 @@ import numpy as np
 import open3d as o3d
 
 SLANT_LIMIT_DEG = 60.0   # a face slanted more than this from the push direction lets the pusher slide off
+# A translation push is met by the face's normal force: slanted more than this (about the
+# friction angle), that force misses the grasp axis and turns the object instead of sliding it.
+TRANSLATION_SLANT_DEG = 30.0
 
 
 class PushError(ValueError):
@@ -73,7 +76,7 @@ def _unit(vector, what: str) -> np.ndarray:
 
 
 def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, what: str,
-             sides: np.ndarray = np.zeros((0, 3))) -> PushPoint:
+             sides: np.ndarray = np.zeros((0, 3)), slant_limit: float = SLANT_LIMIT_DEG) -> PushPoint:
     """The push point where the line meets the object, if the face there takes a push: not too
     slanted, and still there (within a 45 deg slope) at each of `sides` off the line, so the
     pusher does not slide off an edge."""
@@ -87,9 +90,9 @@ def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, 
             raise PushError(f"{what}: the push at {np.round(point * 1000, 1).tolist()} mm is within "
                             f"{np.linalg.norm(side) * 1000:.0f} mm of the face's edge")
     slant = np.rad2deg(np.arccos(np.clip(-normal @ direction, -1.0, 1.0)))
-    if slant > SLANT_LIMIT_DEG:
+    if slant > slant_limit:
         raise PushError(f"{what}: the face at {np.round(point * 1000, 1).tolist()} mm is slanted {slant:.0f} deg "
-                        f"from the push (limit {SLANT_LIMIT_DEG:.0f} deg)")
+                        f"from the push (limit {slant_limit:.0f} deg)")
     return PushPoint(point, normal, direction)
 
 
@@ -97,7 +100,18 @@ def translation_push(surface: ObjectSurface, contact, translation) -> PushPoint:
     """Push point for a TRANSLATION of the principal contact by `translation` (object frame)."""
     along = _unit(translation, "translation")
     # Aim at the contact from the +t side, moving towards -t: the first face met is the one to push.
-    return _checked(surface, np.asarray(contact, float), -along, "translation")
+    return _checked(surface, np.asarray(contact, float), -along, "translation", slant_limit=TRANSLATION_SLANT_DEG)
+
+
+def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:
+    """(k, 3) outward normals of the faces through which rays from `point` (inside the object)
+    along each of `directions` (k, 3) leave it; NaN rows for rays that meet nothing."""
+    directions = np.asarray(directions, float)
+    rays = np.column_stack([np.broadcast_to(np.asarray(point, float), directions.shape), directions])
+    answer = surface.scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    normals = answer["primitive_normals"].numpy().astype(float)
+    normals[~np.isfinite(answer["t_hit"].numpy())] = np.nan
+    return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
 def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,

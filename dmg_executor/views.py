@@ -30,6 +30,7 @@ GRID_STEP = np.deg2rad(7.5)
 EDGE_MARGIN = 30.0                   # px a tag corner must keep from the image border (the pose is only planned)
 FACING_COSINE = np.cos(np.deg2rad(70.0))   # a tag seen more edge-on than this is not counted
 LEVEL_SINE = np.sin(np.deg2rad(15.0))   # fingertip axis across a push line: at most this far off
+IN_LINE_COSINE = np.cos(np.deg2rad(30.0))   # fingertips one behind the other along a push: at most this far off
 NEAREST = 0.04                       # m; closer to the camera than this is not in view
 MARGIN_SCALE = 1.25                  # the tag's white margin: one cell of the 8 across its black square
 SURFACE_SLACK = 0.002                # m; a ray hitting the object this close before a tag point reaches it
@@ -72,16 +73,31 @@ class GripperShape:
     hand_end: float            # m behind the fingertips where the modelled hand ends
     hand_radius: float         # m
 
-    def spheres(self, opening: float, with_hand: bool = True) -> np.ndarray:
-        """(k, 4) centres and radii covering both fingers (`opening` apart) and, if asked, the hand."""
+    def fingers(self, opening: float) -> np.ndarray:
+        """(k, 4) centres and radii covering both fingers, `opening` apart."""
         finger_radius = 1.25 * self.tip_radius           # the finger's box and a margin for pose error
         along = np.arange(0.0, self.finger_length - self.tip_radius + 1e-9, finger_radius)
-        spheres = [np.column_stack([np.full_like(along, side * (opening / 2 + self.tip_radius)), np.zeros_like(along),
-                                    -along, np.full_like(along, finger_radius)]) for side in (-1.0, 1.0)]
-        if with_hand and self.hand_radius > 0 and self.hand_end > self.hand_start:
-            along = np.arange(self.hand_start, self.hand_end + 1e-9, 0.75 * self.hand_radius)
-            spheres.append(np.column_stack([np.zeros((len(along), 2)), -along, np.full_like(along, self.hand_radius)]))
-        return np.vstack(spheres)
+        return np.vstack([np.column_stack([np.full_like(along, side * (opening / 2 + self.tip_radius)),
+                                           np.zeros_like(along), -along, np.full_like(along, finger_radius)])
+                          for side in (-1.0, 1.0)])
+
+    def hand(self) -> np.ndarray:
+        """(k, 4) centres and radii covering the hand (wrist) behind the fingers; none if not modelled."""
+        if self.hand_radius <= 0 or self.hand_end <= self.hand_start:
+            return np.zeros((0, 4))
+        along = np.arange(self.hand_start, self.hand_end + 1e-9, 0.75 * self.hand_radius)
+        return np.column_stack([np.zeros((len(along), 2)), -along, np.full_like(along, self.hand_radius)])
+
+
+def placed(spheres: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Spheres (k, 4) given in a frame, moved to where `pose` (4x4) puts that frame."""
+    return np.column_stack([spheres[:, :3] @ pose[:3, :3].T + pose[:3, 3], spheres[:, 3]])
+
+
+def overlap(first: np.ndarray, second: np.ndarray) -> bool:
+    """Does any sphere of `first` (k, 4) cut one of `second` (j, 4)?"""
+    gaps = np.linalg.norm(first[:, None, :3] - second[None, :, :3], axis=2)
+    return bool((gaps < first[:, None, 3] + second[None, :, 3]).any())
 
 
 @dataclass
@@ -94,9 +110,7 @@ class Occluders:
 
     @classmethod
     def of(cls, shape: GripperShape, holder: np.ndarray, holder_opening: float) -> "Occluders":
-        held = shape.spheres(holder_opening)
-        fixed = np.column_stack([held[:, :3] @ holder[:3, :3].T + holder[:3, 3], held[:, 3]])
-        return cls(fixed, shape.spheres(0.0, with_hand=False))
+        return cls(placed(np.vstack([shape.fingers(holder_opening), shape.hand()]), holder), shape.fingers(0.0))
 
 
 def turns(tilt_limit: float, roll_limit: float) -> np.ndarray:
@@ -175,8 +189,8 @@ def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, ti
 
 def ranked_views(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
                  neutral: np.ndarray, candidates: np.ndarray, level: np.ndarray | None = None,
-                 occluders: Occluders | None = None,
-                 scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 occluders: Occluders | None = None, scene: o3d.t.geometry.RaycastingScene | None = None,
+                 in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pusher orientations (m, 3, 3) among `neutral` @ candidates with the grasp frame at `tip`, best
     view first, and how many tags each sees.
 
@@ -185,6 +199,10 @@ def ranked_views(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, 
     leading one first, as the hand is never exactly square to the face - and twist the object
     out of the grasp (measured: 5.6 deg about the finger axis over a 3 mm push); tips in a
     plane across it push in line with the grasp.
+
+    `in_line`: a push direction. Among views that see as many tags, those with the tips one
+    behind the other along it come first: tips side by side across the push touch one before
+    the other and turn the object about the grasp axis (measured: 4-29 deg over a 13 mm push).
     """
     orientations = neutral @ candidates
     turn = np.linalg.norm(Rotation.from_matrix(candidates).as_rotvec(), axis=1)
@@ -193,5 +211,7 @@ def ranked_views(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, 
         if keep.any():
             orientations, turn = orientations[keep], turn[keep]
     count, off_centre = view_score(camera, tags, object_pose, tip, orientations, occluders, scene)
-    order = np.lexsort((turn, np.round(off_centre / 20.0), -count))
+    crossed = np.zeros(len(orientations), bool) if in_line is None else \
+        np.abs(orientations[:, :, 0] @ in_line) < IN_LINE_COSINE
+    order = np.lexsort((turn, np.round(off_centre / 20.0), crossed, -count))
     return orientations[order], count[order]

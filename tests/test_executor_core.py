@@ -68,6 +68,19 @@ def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surfa
             assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
 
 
+def test_translations_are_pushed_square_onto_a_face(box_surface):
+    from dmg_executor.push_points import PushError, exit_normals, translation_push
+
+    # Rays from the box's centre leave it through the face they point at.
+    rays = np.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0.6, 0.8]])
+    assert np.allclose(exit_normals(box_surface, np.zeros(3), rays), [[1, 0, 0], [0, -1, 0], [0, 0, 1]], atol=1e-6)
+    # A push 45 deg onto the +z face would turn the box (the face's force misses the grasp axis); 15 deg is taken.
+    with pytest.raises(PushError, match="slanted 45 deg"):
+        translation_push(box_surface, np.zeros(3), [0.0, 1.0, 1.0])
+    tilted = np.array([0.0, np.sin(np.deg2rad(15.0)), np.cos(np.deg2rad(15.0))])
+    assert translation_push(box_surface, np.zeros(3), tilted).point[2] == pytest.approx(0.02)
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
@@ -125,6 +138,23 @@ def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_woul
     assert seen_home[0] == 0 and seen[0] >= 1 and np.all(np.diff(seen) <= 0)   # best first
     tilt = np.rad2deg(np.arccos(np.clip(orientations[0][:, 2] @ home[:, 2], -1, 1)))
     assert 0 < tilt <= 30 + 1e-6                          # it had to turn the fingers, within the limit
+
+
+def test_a_pusher_reaching_between_the_holders_fingers_from_its_palm_side_clashes_with_its_hand():
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.views import GripperShape, overlap, placed
+
+    shape = GripperShape(finger_length=0.075, tip_radius=0.008, hand_start=0.1, hand_end=0.33, hand_radius=0.045)
+    holder = placed(np.vstack([shape.fingers(0.04), shape.hand()]), np.eye(4))
+    # Tips 47 mm in from the holder's fingertips, pointing out of it: its hand is where the holder's is.
+    from_palm = np.eye(4)
+    from_palm[:3, 3] = [0.0, 0.0, -0.047]
+    assert overlap(placed(shape.hand(), from_palm), holder)
+    # Beyond the fingertips pointing back at them (the paper's rotation push): clear.
+    beyond = np.eye(4)
+    beyond[:3, :3], beyond[:3, 3] = Rotation.from_euler("x", 180, degrees=True).as_matrix(), [0.0, 0.0, 0.07]
+    assert not overlap(placed(np.vstack([shape.fingers(0.0), shape.hand()]), beyond), holder)
 
 
 def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
