@@ -440,10 +440,15 @@ class PlanExecutor:
         # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occlusion=True, in_line=direction)
-        start = point - (self._reach(direction, views[0]) + s.gap) * direction
-        if self._hands_clash(obs, start, views[0]):
+        # The best view whose hand keeps clear of the holding gripper (usually the first).
+        for first, view in enumerate(views):
+            start = point - (self._reach(direction, view) + s.gap) * direction
+            if not self._hands_clash(obs, start, view):
+                break
+        else:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
-                             "would put the pusher's hand into the holding gripper")
+                             "would put the pusher's hand into the holding gripper however it is turned")
+        views, seen = views[first:], seen[first:]
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
