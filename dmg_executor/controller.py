@@ -44,12 +44,18 @@ EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
+HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to where the pusher goes is headway
+UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
 
 
 class Unwatched(PushError):
     """Every push that would do the job starts where the camera cannot see the object."""
+
+
+class Unreachable(PushError):
+    """Every push that would do the job starts where the pusher could not get to before."""
 
 
 class Step(IntEnum):
@@ -134,6 +140,17 @@ class _Push:
     orientations: list[np.ndarray]   # pusher orientation wanted at each waypoint (camera on the object)
     lever: float              # m, pusher distance from the grasp axis (rotations)
     other_views: list[np.ndarray] = field(default_factory=list)   # next best orientations at the push start
+    homeward: bool = False    # not a push: the way back to where the pusher started, to plan afresh from there
+
+
+@dataclass
+class _Headway:
+    """The closest the pusher has come to where it is going, and when it last came closer."""
+
+    target: bytes          # where it is going (position and orientation)
+    offset: float          # m
+    turn: float            # rad
+    since: float           # s
 
 
 @dataclass
@@ -207,6 +224,8 @@ class PlanExecutor:
         self.phase = ""
         self.reference_pending = False
         self.looking: _Look | None = None
+        self.headway: _Headway | None = None
+        self.unreachable: list[np.ndarray] = []   # push directions (holder frame) whose start the pusher could not reach
         self.touch_from = np.zeros(3)     # pusher in the holder's frame where a rotation push began closing its gap
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
@@ -294,7 +313,7 @@ class PlanExecutor:
         primitive = self.primitives[self.index]
         try:
             self.push = self._plan_push(primitive, obs)
-        except Unwatched as error:
+        except (Unwatched, Unreachable) as error:
             self.notes.append(f"primitive {self.index} left at {self.errors[0] * 1000:.1f} mm, "
                               f"{np.rad2deg(self.errors[1]):.1f} deg: {error}")
             self.index, self.pushes = self.index + 1, 0
@@ -341,13 +360,14 @@ class PlanExecutor:
         s = self.settings
         holder_in_object = invert(obs.object_in_holder)
         middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
+        occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             # Along the remaining motion (holder frame) where the face there is square to it; else, or
             # when the camera cannot watch that push (it would need the pusher behind the object),
             # square onto another face round the grasp axis, up to DETOUR_LIMIT off the motion: such a
             # push goes as far as the motion's share along it, the next one takes the rest.
             motion = self._remaining_motion(obs)
-            directions = [motion] + self._square_pushes(obs, motion)
+            directions = [motion] + self._square_pushes(obs, motion, holder_in_object)
             pushes, problems = [], []
             for direction in directions:
                 try:   # the contact moves over the object opposite to the object's motion
@@ -356,7 +376,7 @@ class PlanExecutor:
                     problems.append(str(error))
             if not pushes:
                 raise PushError("; ".join(problems))
-            candidates = self._watched(obs, pushes)
+            candidates = self._watched(obs, pushes, occluders)
             # The most progress: the full motion when the camera can watch it.
             return max(candidates, key=lambda c: float(motion @ (invert(obs.holder)[:3, :3] @ c[0].direction)))[0]
         else:
@@ -387,30 +407,38 @@ class PlanExecutor:
             pushes = [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
             if not pushes:
                 raise PushError("; ".join(problems))
-        candidates = self._watched(obs, pushes)
+        candidates = self._watched(obs, pushes, occluders)
         return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: the longest lever beyond the tips
 
-    def _square_pushes(self, obs: Observation, motion: np.ndarray) -> list[np.ndarray]:
+    def _square_pushes(self, obs: Observation, motion: np.ndarray, holder_in_object: np.ndarray) -> list[np.ndarray]:
         """Directions (holder frame, across the grasp axis) square onto the object's faces round the
-        grasp, within DETOUR_LIMIT of `motion`: pushing along one slides the object without turning it."""
+        grasp, within DETOUR_LIMIT of `motion` and moving the object more than the tolerance along it:
+        pushing along one slides the object without turning it."""
         angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
         rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
-        in_object = invert(obs.object_in_holder)
-        normals = exit_normals(self.surface, in_object[:3, 3], rays @ in_object[:3, :3].T)
+        normals = exit_normals(self.surface, holder_in_object[:3, 3], rays @ holder_in_object[:3, :3].T)
         pushes = -(normals[np.isfinite(normals).all(axis=1)] @ obs.object_in_holder[:3, :3].T)
         pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
         lengths = np.linalg.norm(pushes, axis=1)
         pushes = pushes[lengths > 0.5] / lengths[lengths > 0.5, None]
         pushes = pushes[np.unique(np.round(pushes, 2), axis=0, return_index=True)[1]]
-        wanted = pushes @ motion / max(float(np.linalg.norm(motion)), 1e-12) >= np.cos(DETOUR_LIMIT)
+        # ... and one that would move the object less than the tolerance along the motion is no push.
+        share = pushes @ motion
+        wanted = (share >= np.cos(DETOUR_LIMIT) * float(np.linalg.norm(motion))) & (share > self.settings.position_tolerance)
         return list(pushes[wanted])
 
-    def _watched(self, obs: Observation, pushes: list) -> list[tuple[_Push, int]]:
+    def _watched(self, obs: Observation, pushes: list, occluders: Occluders) -> list[tuple[_Push, int]]:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
+        if self.unreachable:
+            directions = np.array([obs.object_in_holder[:3, :3] @ push.direction for push in pushes])
+            near = (directions @ np.array(self.unreachable).T >= np.cos(UNREACHABLE_CONE)).any(axis=1)
+            if near.all():
+                raise Unreachable("the pusher could not get to where any push that would do it starts")
+            pushes = [push for push, excluded in zip(pushes, near) if not excluded]
         candidates, problems = [], []
         for push in pushes:
             try:
-                candidates.append(self._push_from(obs, push))
+                candidates.append(self._push_from(obs, push, occluders))
             except RouteError as error:
                 problems.append(str(error))
         if not candidates:
@@ -423,7 +451,7 @@ class PlanExecutor:
                             "(it would need the pusher behind the object)")
         return watched
 
-    def _push_from(self, obs: Observation, push) -> tuple[_Push, int]:
+    def _push_from(self, obs: Observation, push, occluders: Occluders) -> tuple[_Push, int]:
         """Route and orientations for a push point (object frame); how many tags the camera sees from its start."""
         s = self.settings
         holder = obs.holder
@@ -439,11 +467,11 @@ class PlanExecutor:
         waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
-        views, seen = self._views(obs, provisional, level=holder[:3, 0], occlusion=True, in_line=direction)
+        views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first).
         for first, view in enumerate(views):
             start = point - (self._reach(direction, view) + s.gap) * direction
-            if not self._hands_clash(obs, start, view):
+            if not self._hands_clash(start, view, occluders):
                 break
         else:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
@@ -454,28 +482,25 @@ class PlanExecutor:
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
                      _distinct(views[1:][seen[1:] > 0], views[0])), int(seen[0])
 
-    def _hands_clash(self, obs: Observation, place: np.ndarray, orientation: np.ndarray) -> bool:
+    def _hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders) -> bool:
         """Would the pusher with its tips at `place`, turned `orientation`, have its hand in the holding
         gripper or its fingers in that gripper's hand? (The arms do not collide in the simulation;
         they would on the robot.) Fingers near fingers are the keep-out box's business."""
         pusher = np.eye(4)
         pusher[:3, :3], pusher[:3, 3] = orientation, place
-        holder_hand = placed(self.shape.hand(), obs.holder)
-        return (overlap(placed(self.shape.hand(), pusher), np.vstack([holder_hand,
-                                                                     placed(self.shape.fingers(obs.opening), obs.holder)]))
-                or overlap(placed(self.shape.fingers(0.0), pusher), holder_hand))
+        return (overlap(placed(self.shape.hand(), pusher), occluders.fixed)
+                or overlap(placed(occluders.riding, pusher), occluders.hand))
 
     def _views(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None,
-               occlusion: bool = False, in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+               occluders: Occluders | None = None, in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Pusher orientations at `place`, best view of the object's tags first, and how many tags
         each sees (without a camera model: only the orientation it started in, seeing none).
-        `occlusion` also checks what hides tags (10x the time): for push starts, where a push
+        `occluders` also checks what hides tags (10x the time): for push starts, where a push
         waits for a fresh pose; on the way there the held object may go unseen a while."""
         neutral = self.pusher_home[:3, :3]
         if self.turns is None:
             return neutral[None], np.zeros(1, int)
-        occluders, scene = (Occluders.of(self.shape, obs.holder, obs.opening), self.surface.scene) if occlusion \
-            else (None, None)
+        scene = self.surface.scene if occluders is not None else None
         return ranked_views(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral, self.turns,
                             level, occluders, scene, in_line)
 
@@ -490,7 +515,12 @@ class PlanExecutor:
 
     def _approach(self, obs: Observation) -> Command:
         command = self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+        if not self._arrived(obs) and self._stalled(obs):
+            return self._give_up_push(obs)
         if self._arrived(obs):
+            if self.push.homeward and self.waypoint == len(self.push.waypoints) - 1:
+                self._enter(Step.FIND_CONTACT, obs)
+                return Command()
             if self.waypoint == len(self.push.waypoints) - 1 and obs.time - obs.object_time > self.settings.stale_after:
                 return self._look_again(obs)     # at the push start: no push before a fresh pose
             self.waiting_since = None
@@ -502,13 +532,35 @@ class PlanExecutor:
                 return Command(holder_grip=self._loosened(obs))
         return command
 
+    def _give_up_push(self, obs: Observation) -> Command:
+        """The arm cannot get where the push starts (a joint at its limit): at the push start, turn the
+        camera another way; else give the push up, take the pusher back to where it started (its arm
+        untangled) and plan another push from there, never again one this way."""
+        if self.push.homeward:
+            self._enter(Step.FIND_CONTACT, obs)      # not home, but as close as it gets: plan from here
+            return Command()
+        if self.waypoint == len(self.push.waypoints) - 1 and self.push.other_views:
+            self.push.orientations[-1] = self.push.other_views.pop(0)
+            return Command()
+        self.unreachable.append(self.push.local_direction)
+        self.notes.append(f"a push of primitive {self.index} given up: the pusher came no closer to waypoint "
+                          f"{self.waypoint + 1} of {len(self.push.waypoints)} in {self.settings.stall_time:.1f} s")
+        try:
+            self._head_home(obs)
+        except RouteError:
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
+        self.push.homeward = True
+        self._enter(Step.APPROACH, obs)
+        return Command()
+
     def _look_around(self, obs: Observation) -> Command:
         """Turn the pusher where it stands through its best views of the object's last seen pose (it
         is held: it has not moved since), each for `stale_after`, until the camera finds it; after
         the last, go back to where the run started, where the camera saw it first."""
         if self.looking is None:
             place = obs.pusher[:3, 3].copy()
-            views, seen = self._views(obs, place, occlusion=True)
+            views, seen = self._views(obs, place, occluders=Occluders.of(self.shape, obs.holder, obs.opening))
             self.looking = _Look(place, [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0]))
         look = self.looking
         if look.homeward:
@@ -662,6 +714,19 @@ class PlanExecutor:
         return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
 
     # --- motion helpers
+    def _stalled(self, obs: Observation) -> bool:
+        """Has the pusher come no closer to the current waypoint for `stall_time`?"""
+        target, orientation = self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint]
+        offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))
+        turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).magnitude()
+        key = target.tobytes() + orientation.tobytes()
+        headway = self.headway
+        if (headway is None or headway.target != key or offset < headway.offset - HEADWAY[0]
+                or turn < headway.turn - HEADWAY[1]):
+            self.headway = _Headway(key, offset, turn, obs.time)
+            return False
+        return obs.time - headway.since > self.settings.stall_time
+
     def _arrived(self, obs: Observation) -> bool:
         """The pusher is at the current waypoint, turned as wanted there."""
         offset = np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, TwistStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -53,7 +53,7 @@ STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state and a fresh object 
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("executor_node", __doc__, "example: executor_node --ros-args -p use_sim_time:=true",
-                    argv, ExecutorNode, lambda node: MultiThreadedExecutor(num_threads=4),
+                    argv, ExecutorNode, lambda node: MultiThreadedExecutor(num_threads=6),
                     startup_errors=(ValueError,))
 
 
@@ -135,10 +135,13 @@ class ExecutorNode(Node):
         self.action = ActionServer(self, ExecuteRepositioning, "execute_repositioning", execute_callback=self.execute,
                                    goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
                                    callback_group=self.group)
-        self.create_timer(1.0 / values["control_rate"], self.tick, callback_group=self.group)
+        # The tick and the watchdog each in a group of their own: a long tick (push planning) delays the
+        # next one instead of queueing more of them on the control lock, which would take every thread
+        # and starve the pose subscriptions (and so trip the watchdog).
+        self.create_timer(1.0 / values["control_rate"], self.tick, callback_group=MutuallyExclusiveCallbackGroup())
         # Wall-clock watchdog: with use_sim_time a dead simulator also stops the clock, and so the tick.
         self.robot_heard = time.monotonic()
-        self.create_timer(WATCHDOG_PERIOD, self.watchdog, callback_group=self.group,
+        self.create_timer(WATCHDOG_PERIOD, self.watchdog, callback_group=MutuallyExclusiveCallbackGroup(),
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"executor up: {holder} holds, {pusher} pushes; control at {values['control_rate']:g} Hz "
                                f"on {values['object_pose_topic']}")

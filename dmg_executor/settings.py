@@ -53,6 +53,7 @@ class ExecutorSettings:
     slip_distance: float
     slip_angle: float              # rad
     step_timeout: float
+    stall_time: float
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":

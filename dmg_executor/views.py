@@ -102,15 +102,21 @@ def overlap(first: np.ndarray, second: np.ndarray) -> bool:
 
 @dataclass
 class Occluders:
-    """Spheres that can hide tags: `fixed` in the base frame (the holding gripper), `riding` in the
-    pusher's grasp frame (its own fingers, always at the same place in its camera's image)."""
+    """Spheres that can hide tags: the holding gripper's `hand` and `fingers` in the base frame,
+    `riding` in the pusher's grasp frame (its own fingers, always at the same place in its camera's image)."""
 
-    fixed: np.ndarray          # (k, 4) centre, radius
+    hand: np.ndarray           # (k, 4) centre, radius
+    fingers: np.ndarray        # (i, 4)
     riding: np.ndarray         # (j, 4)
 
     @classmethod
     def of(cls, shape: GripperShape, holder: np.ndarray, holder_opening: float) -> "Occluders":
-        return cls(placed(np.vstack([shape.fingers(holder_opening), shape.hand()]), holder), shape.fingers(0.0))
+        return cls(placed(shape.hand(), holder), placed(shape.fingers(holder_opening), holder), shape.fingers(0.0))
+
+    @property
+    def fixed(self) -> np.ndarray:
+        """(k + i, 4): the holding gripper's spheres."""
+        return np.vstack([self.hand, self.fingers])
 
 
 def turns(tilt_limit: float, roll_limit: float) -> np.ndarray:

@@ -107,10 +107,9 @@ def _damped_solve(svd, twist: np.ndarray, damping: float, threshold: float) -> n
 
 
 class Cell:
-    def __init__(self, config: SimConfig | None = None, robot: dict | None = None, workdir: Path | None = None):
+    def __init__(self, config: SimConfig | None = None, robot: dict | None = None):
         self.config = config or load_sim_config()
         self.robot = robot or load_robot()
-        self._workdir = workdir or Path(tempfile.mkdtemp(prefix="dmg_sim_"))
         self._renderer: mujoco.Renderer | None = None
         self._models: dict[str, mujoco.MjModel] = {}
         self.object: ObjectModel | None = None
@@ -127,8 +126,10 @@ class Cell:
         except KeyError as error:
             raise CellError(str(error.args[0])) from None
         if name not in self._models:
-            xml = cell_mjcf(self.config, self.robot, model, self._workdir / name)
-            self._models[name] = mujoco.MjModel.from_xml_string(xml)
+            # The tag textures are files only until the model is compiled: it keeps their pixels.
+            with tempfile.TemporaryDirectory(prefix="dmg_sim_") as textures:
+                xml = cell_mjcf(self.config, self.robot, model, Path(textures))
+                self._models[name] = mujoco.MjModel.from_xml_string(xml)
         return model, self._models[name]
 
     def _bind(self, object_model: ObjectModel, model: mujoco.MjModel) -> None:

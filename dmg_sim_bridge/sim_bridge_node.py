@@ -28,11 +28,9 @@ from __future__ import annotations
 import math
 import os
 import queue
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -84,7 +82,7 @@ class SimBridgeNode(Node):
         self.commands: queue.SimpleQueue = queue.SimpleQueue()
         self.stopping = threading.Event()
         # Built and reset here; from now on only the simulation thread touches it.
-        self.cell = Cell(workdir=Path(tempfile.mkdtemp(prefix="dmg_sim_bridge_")))
+        self.cell = Cell()
         self.cell.reset(object_name=self.values["object"])
         self.statistics = {"real_time_factor": 0.0, "frames": 0, "commands_refused": 0}
 

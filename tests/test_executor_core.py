@@ -158,6 +158,8 @@ def test_a_pusher_reaching_between_the_holders_fingers_from_its_palm_side_clashe
 
 
 def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
+    from dataclasses import replace
+
     import open3d as o3d
 
     from dmg_executor.push_points import ObjectSurface
@@ -174,17 +176,17 @@ def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
         return int(view_score(camera, tags, np.eye(4), tip, looking, occluders, scene)[0][0])
 
     none = np.zeros((0, 4))
-    assert seen() == 1 and seen(Occluders(none, none)) == 1
-    assert seen(Occluders(np.array([[0.0, 0.005, -0.1, 0.01]]), none)) == 0        # a finger halfway
-    assert seen(Occluders(np.array([[0.05, 0.0, -0.1, 0.01]]), none)) == 1         # beside the line of sight
-    assert seen(Occluders(none, np.array([[0.0, 0.0, 0.1, 0.01]]))) == 0           # the pusher's own fingertip
+    assert seen() == 1 and seen(Occluders(none, none, none)) == 1
+    assert seen(Occluders(np.array([[0.0, 0.005, -0.1, 0.01]]), none, none)) == 0        # a finger halfway
+    assert seen(Occluders(np.array([[0.05, 0.0, -0.1, 0.01]]), none, none)) == 1         # beside the line of sight
+    assert seen(Occluders(none, none, np.array([[0.0, 0.0, 0.1, 0.01]]))) == 0           # the pusher's own fingertip
     # A holding gripper whose finger hangs in front of the tag, and one whose fingers are far apart.
     shape = GripperShape(finger_length=0.075, tip_radius=0.008, hand_start=0.1, hand_end=0.33, hand_radius=0.045)
     holder = np.eye(4)
     holder[:3, :3] = np.column_stack([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])   # fingers along +y, 3 cm before the tag
     holder[:3, 3] = [0.0, 0.03, -0.03]
-    assert seen(Occluders(Occluders.of(shape, holder, 0.0).fixed, none)) == 0
-    assert seen(Occluders(Occluders.of(shape, holder, 0.08).fixed, none)) == 1
+    assert seen(replace(Occluders.of(shape, holder, 0.0), riding=none)) == 0
+    assert seen(replace(Occluders.of(shape, holder, 0.08), riding=none)) == 1
     # The object itself: a block of it standing between the camera and the tag, then beside the line of sight.
     block = o3d.geometry.TriangleMesh.create_box(0.02, 0.02, 0.01)
     for offset, expected in (([-0.01, -0.01, -0.05], 0), ([0.04, -0.01, -0.05], 1)):
@@ -322,3 +324,37 @@ def test_a_push_that_loses_sight_of_the_object_stops_held_and_the_run_goes_on_on
     assert outcome.outcome == Outcome.OK, outcome.message
     assert "stopped: object unseen" in outcome.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
+def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_home(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    home = cell.grasp_pose("arm2")[:3, 3]
+    while executor.step.name != "APPROACH" and not executor.done:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    approach_until = cell.time + 1.0              # part of the way
+    while cell.time < approach_until:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - home) > 0.02
+    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    while cell.time < stuck_until:               # fault: the pushing arm does not move (a joint at its limit)
+        loop.perceive()
+        command = executor.update(loop.observe())
+        command.pusher[:] = 0.0
+        loop.apply(command)
+        cell.run(loop.control_period)
+    assert any("given up" in note for note in executor.notes), executor.notes
+    assert len(executor.unreachable) == 1
+    # The box's only face square to this motion is the one it gave up: the primitive is left with a note,
+    # the pusher back where it started, the grip held.
+    outcome = loop.run(executor, time_limit=60)
+    assert outcome.outcome == Outcome.OUT_OF_TOLERANCE, outcome.message
+    assert "could not get to where any push" in outcome.message
+    assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - home) < 0.01
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)

@@ -17,8 +17,8 @@ from dmg_sim_bridge.cell import Cell, default_grasp
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    cell = Cell(workdir=tmp_path_factory.mktemp("cell"))
+def cell():
+    cell = Cell()
     yield cell
     cell.close()
 

@@ -17,8 +17,8 @@ PUSH_SPEED = 0.01   # m/s
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    cell = Cell(workdir=tmp_path_factory.mktemp("cell"))
+def cell():
+    cell = Cell()
     yield cell
     cell.close()
 
