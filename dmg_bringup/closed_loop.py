@@ -59,7 +59,8 @@ class ClosedLoop:
         self.next_frame = cell.time + self.camera_period
         grey = cv2.cvtColor(cell.render(), cv2.COLOR_RGB2GRAY)
         holder_from_camera = invert(cell.grasp_pose("arm1")) @ cell.camera_pose()
-        estimate = self.estimator.estimate(self.estimator.detect(grey), holder_from_camera, cell.object.name)
+        estimate = self.estimator.estimate(self.estimator.detect(grey), holder_from_camera, cell.object.name,
+                                           self.seen)
         if estimate is not None:
             self.seen, self.seen_time = estimate.pose, cell.time
 

@@ -225,6 +225,8 @@ class PlanExecutor:
         self.reference_pending = False
         self.looking: _Look | None = None
         self.headway: _Headway | None = None
+        self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
+        self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (holder frame) whose start the pusher could not reach
         self.touch_from = np.zeros(3)     # pusher in the holder's frame where a rotation push began closing its gap
         self.holder_start: np.ndarray | None = None
@@ -813,6 +815,17 @@ class PlanExecutor:
         return None
 
     def _slip(self, obs: Observation) -> tuple[Outcome, str] | None:
+        """A slip once `slip_poses` poses in a row show one: a single stray estimate is none."""
+        fault = self._slip_in(obs)
+        if fault is None:
+            self.slip_poses = 0
+            return None
+        if obs.object_time != self.slip_pose_time:
+            self.slip_poses, self.slip_pose_time = self.slip_poses + 1, obs.object_time
+        return fault if self.slip_poses >= self.settings.slip_poses else None
+
+    def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
+        """What the latest pose shows: the object moved in the closed grip, or tilted while pushed."""
         s = self.settings
         if self.held_reference is not None:
             moved, turned = distance(self.held_reference, obs.object_in_holder)

@@ -52,6 +52,7 @@ class ExecutorSettings:
     robot_timeout: float
     slip_distance: float
     slip_angle: float              # rad
+    slip_poses: int
     step_timeout: float
     stall_time: float
 
@@ -64,7 +65,8 @@ class ExecutorSettings:
                 value = values[field.name]
             else:
                 value = np.deg2rad(float(values[f"{field.name}_deg"]))
-            converted[field.name] = np.asarray(value, float) if field.name.startswith("workspace") else float(value)
+            converted[field.name] = (np.asarray(value, float) if field.name.startswith("workspace")
+                                     else int(value) if field.type in (int, "int") else float(value))
         settings = cls(**converted)
         settings.validate()
         return settings

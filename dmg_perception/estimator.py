@@ -3,7 +3,9 @@
 Per tag, cv2.aruco finds the corners (AprilTag corner refinement) and solvePnP's
 IPPE_SQUARE gives its two candidate poses; every candidate proposes an object pose through
 the object's tag layout. The proposal that explains the most tags (each tag's corners
-within `inlier_threshold` pixels) wins, tags it cannot explain are rejected as outliers
+within `inlier_threshold` pixels) wins - of proposals that explain them about as well (a
+lone tag seen obliquely has two, its pose mirrored), the one nearest the object's last
+pose, when given -, tags it cannot explain are rejected as outliers
 (a misdetection, a tag of another object), and the pose is refined by Levenberg-Marquardt
 over all corners of the inlier tags. Quality = RMS reprojection error over those corners;
 covariance = sigma^2 (J^T J)^-1 of the reprojection, with sigma the residual's standard
@@ -18,7 +20,9 @@ import numpy as np
 
 from dmg_perception.tags import detector, tag_corners, tag_pose
 from dmg_planner.objects import ObjectModel
-from dmg_planner.transforms import from_rotation, invert
+from dmg_planner.transforms import distance, from_rotation, invert
+
+AMBIGUOUS_PX = 1.0   # proposals whose per-tag reprojection errors differ by less than this explain the tags alike
 
 class EstimationError(ValueError):
     """A configuration the estimator cannot work with; the message says why."""
@@ -109,15 +113,16 @@ class ObjectPoseEstimator:
         return max(sorted(counts), key=lambda name: counts[name]) if counts else None
 
     def estimate(self, observations: list[TagObservation], frame_from_camera: np.ndarray | None = None,
-                 object_name: str | None = None) -> ObjectEstimate | None:
+                 object_name: str | None = None, prior: np.ndarray | None = None) -> ObjectEstimate | None:
         """The object's pose (in the frame `frame_from_camera` maps the camera into; default the
-        camera) from the observations; None when none of its tags is explained."""
+        camera) from the observations; None when none of its tags is explained. `prior`: its last
+        pose in that frame, which settles between proposals that explain the tags alike."""
         object_name = object_name or self.identify(observations)
         mine = [o for o in observations if o.id in self.tags and self.tags[o.id][0] == object_name]
         if not mine:
             return None
         layout = {o.id: tag_corners(self.tags[o.id][1]) for o in mine}
-        best, best_score = None, None
+        proposals = []     # (tags explained, their summed error, camera_from_object)
         for observation in mine:
             rotation, position = tag_pose(self.tags[observation.id][1])
             object_from_tag = from_rotation(rotation, position)
@@ -125,9 +130,15 @@ class ObjectPoseEstimator:
                 candidate = camera_from_tag @ invert(object_from_tag)
                 errors = self._errors(candidate, mine, layout)
                 inliers = errors < self.inlier_threshold
-                score = (int(inliers.sum()), -float(errors[inliers].sum()))
-                if best_score is None or score > best_score:
-                    best, best_score = candidate, score
+                proposals.append((int(inliers.sum()), float(errors[inliers].sum()), candidate))
+        most = max(count for count, _, _ in proposals)
+        explaining = [proposal for proposal in proposals if proposal[0] == most]
+        best = min(explaining, key=lambda proposal: proposal[1])
+        alike = [proposal for proposal in explaining if proposal[1] <= best[1] + AMBIGUOUS_PX * max(most, 1)]
+        if prior is not None and len(alike) > 1:
+            to_frame = np.eye(4) if frame_from_camera is None else frame_from_camera
+            best = min(alike, key=lambda proposal: distance(to_frame @ proposal[2], prior)[1])
+        best = best[2]
         errors = self._errors(best, mine, layout)
         inliers = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
         if not inliers:

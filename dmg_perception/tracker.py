@@ -75,7 +75,9 @@ class Tracker:
             else:
                 frame_from_camera = invert(gripper) @ camera
                 result.camera_from_frame = invert(frame_from_camera)
-                result.estimate = self.estimator.estimate(result.observations, frame_from_camera, self.object_name)
+                prior = self.last_seen.estimate.pose if self.last_seen is not None else None
+                result.estimate = self.estimator.estimate(result.observations, frame_from_camera, self.object_name,
+                                                          prior)
                 if result.estimate is None:
                     known = [o.id for o in result.observations if o.id in self.estimator.tags]
                     result.problem = ("no tag of the object in view" if not known else

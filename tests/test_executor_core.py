@@ -358,3 +358,33 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     assert "could not get to where any push" in outcome.message
     assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - home) < 0.01
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loop_parts, box_surface):
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+
+    def tick(shift: float = 0.0) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        if shift:     # the estimate a mirrored lone tag gives: the object 14 mm off, freshly seen
+            moved = observation.object_in_holder.copy()
+            moved[:3, 3] += [0.0, shift, 0.0]
+            observation = replace(observation, object_in_holder=moved, object_time=observation.time)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+
+    while executor.step.name != "APPROACH" and not executor.done:
+        tick()
+    tick(0.014)
+    for _ in range(5):
+        tick()
+    assert not executor.done, executor.result
+    for _ in range(executor.settings.slip_poses):
+        tick(0.014)
+    assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)

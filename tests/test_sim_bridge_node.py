@@ -70,6 +70,12 @@ class CellClient(RosTestNode):
             self.twist(role, linear)
             self.spin(1.0 / rate)
 
+    def spin_sim(self, seconds: float, wall_limit: float = 30.0) -> None:
+        """Spin until `seconds` of simulated time have passed (a loaded machine runs the sim slower)."""
+        until, deadline = self.sim_time() + seconds, time.monotonic() + wall_limit
+        while self.sim_time() < until and time.monotonic() < deadline:
+            self.spin(0.02)
+
     def reset(self, **fields):
         return self.call(self.reset_client, self.ResetScene.Request(**fields))
 
@@ -131,9 +137,9 @@ def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
     steps = np.diff([position(p) for p in poses], axis=0) / np.diff([stamp(p) for p in poses])[:, None]
     assert len(steps) > 50
     assert np.median(steps, axis=0) == pytest.approx([0.0, 0.0, 0.04], abs=0.04 * 0.05)
-    client.spin(0.4)                          # no more commands: the watchdog (0.1 s) stops the arm
+    client.spin_sim(0.4)                      # no more commands: the watchdog (0.1 s of sim time) stops the arm
     held = position(client.latest[topic])
-    client.spin(0.5)
+    client.spin_sim(0.5)
     assert np.linalg.norm(position(client.latest[topic]) - held) < 1e-4
     client.drive("arm2", (0.0, 0.0, -0.04), seconds=1.3)   # back down, clear of the object
 
