@@ -50,14 +50,6 @@ FACE_RAYS = 36        # rays round the grasp axis that find the faces a translat
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
 
 
-class Unwatched(PushError):
-    """Every push that would do the job starts where the camera cannot see the object."""
-
-
-class Unreachable(PushError):
-    """Every push that would do the job starts where the pusher could not get to before."""
-
-
 class Step(IntEnum):
     """Same values as the feedback steps of dmg_interfaces/action/ExecuteRepositioning."""
 
@@ -315,14 +307,13 @@ class PlanExecutor:
         primitive = self.primitives[self.index]
         try:
             self.push = self._plan_push(primitive, obs)
-        except (Unwatched, Unreachable) as error:
-            self.notes.append(f"primitive {self.index} left at {self.errors[0] * 1000:.1f} mm, "
-                              f"{np.rad2deg(self.errors[1]):.1f} deg: {error}")
+        except (PushError, RouteError) as error:
+            # No push can do (the rest of) it: the next primitive aims at its own target from here,
+            # and the result says what was left and why.
+            self.notes.append(f"primitive {self.index} ({primitive.kind.name.lower()}) left at "
+                              f"{self.errors[0] * 1000:.1f} mm, {np.rad2deg(self.errors[1]):.1f} deg: no safe push: {error}")
             self.index, self.pushes = self.index + 1, 0
             return Command()
-        except (PushError, RouteError) as error:
-            return self._abort(Outcome.LIMIT_VIOLATION, f"primitive {self.index} ({primitive.kind.name.lower()}): "
-                               f"no safe push: {error}")
         outside = [p for p in self.push.waypoints + [self.push.start]
                    if np.any(p < self.settings.workspace_min) or np.any(p > self.settings.workspace_max)]
         if outside:
@@ -364,12 +355,13 @@ class PlanExecutor:
         middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
         occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         if primitive.kind == PrimitiveKind.TRANSLATION:
-            # Along the remaining motion (holder frame) where the face there is square to it; else, or
-            # when the camera cannot watch that push (it would need the pusher behind the object),
-            # square onto another face round the grasp axis, up to DETOUR_LIMIT off the motion: such a
-            # push goes as far as the motion's share along it, the next one takes the rest.
+            # Square onto a face round the grasp axis, along the normal line through the grasp's middle
+            # (the contact force is along the face's normal: off that line it would turn the object),
+            # up to DETOUR_LIMIT off the remaining motion (holder frame): such a push goes as far as the
+            # motion's share along it, the next one takes the rest. Where no face is square to any
+            # such line (a curved object), along the motion itself.
             motion = self._remaining_motion(obs)
-            directions = [motion] + self._square_pushes(obs, motion, holder_in_object)
+            directions = self._square_pushes(obs, motion, holder_in_object) or [motion]
             pushes, problems = [], []
             for direction in directions:
                 try:   # the contact moves over the object opposite to the object's motion
@@ -435,7 +427,7 @@ class PlanExecutor:
             directions = np.array([obs.object_in_holder[:3, :3] @ push.direction for push in pushes])
             near = (directions @ np.array(self.unreachable).T >= np.cos(UNREACHABLE_CONE)).any(axis=1)
             if near.all():
-                raise Unreachable("the pusher could not get to where any push that would do it starts")
+                raise PushError("the pusher could not get to where any push that would do it starts")
             pushes = [push for push, excluded in zip(pushes, near) if not excluded]
         candidates, problems = [], []
         for push in pushes:
@@ -449,7 +441,7 @@ class PlanExecutor:
             return candidates
         watched = [c for c in candidates if c[1] > 0]
         if not watched:
-            raise Unwatched("the wrist camera would see none of the object's tags from where the push starts "
+            raise PushError("the wrist camera would see none of the object's tags from where the push starts "
                             "(it would need the pusher behind the object)")
         return watched
 
