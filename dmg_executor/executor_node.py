@@ -141,6 +141,7 @@ class ExecutorNode(Node):
         self.create_timer(1.0 / values["control_rate"], self.tick, callback_group=MutuallyExclusiveCallbackGroup())
         # Wall-clock watchdog: with use_sim_time a dead simulator also stops the clock, and so the tick.
         self.robot_heard = time.monotonic()
+        self.tick_finished = time.monotonic()   # a tick that plans pushes can hold the subscriptions off a while
         self.create_timer(WATCHDOG_PERIOD, self.watchdog, callback_group=MutuallyExclusiveCallbackGroup(),
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"executor up: {holder} holds, {pusher} pushes; control at {values['control_rate']:g} Hz "
@@ -325,12 +326,15 @@ class ExecutorNode(Node):
     def watchdog(self) -> None:
         """Wall clock: idle state messages, and a run stopped when the robot falls silent."""
         with self.lock:
-            run, silent = self.run, time.monotonic() - self.robot_heard
+            run, silent = self.run, time.monotonic() - max(self.robot_heard, self.tick_finished)
         if run is None:
             self.publish_idle_state()
-        elif silent > self.settings.robot_timeout:
+        elif silent > self.settings.robot_timeout and not self.control_lock.locked():
+            # Silent robot and no control tick either (with sim time a dead simulator stops them
+            # both); while ticks run, the tick's own check of the poses' age (node clock) applies.
             with self.control_lock:
-                if not run.executor.done:
+                silent = time.monotonic() - max(self.robot_heard, self.tick_finished)   # a tick may have just run
+                if silent > self.settings.robot_timeout and not run.executor.done:
                     self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
                                                         f"{silent:.1f} s (wall clock): stopped"))
 
@@ -351,6 +355,7 @@ class ExecutorNode(Node):
             else:
                 command = executor.update(self.observation())
             self.finish(run, command)
+            self.tick_finished = time.monotonic()
 
     def finish(self, run: Run, command: Command) -> None:
         """Send a tick's command and progress; when the run has ended, stop and hold once more."""
