@@ -48,7 +48,7 @@ from dmg_planner.transforms import invert
 
 
 WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
-STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state and a fresh object pose before it is refused
+STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state, the camera model and a fresh object pose
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -225,7 +225,9 @@ class ExecutorNode(Node):
         alpha = float(request.alpha)
         if not 0.0 <= alpha <= 1.0:
             raise GoalError(Outcome.BAD_REQUEST, f"alpha {alpha} is outside [0, 1]")
-        self.wait_until(self.seen_fresh, STARTUP_WAIT)
+        # Right after start-up on a loaded machine some of these come late; the camera model is not
+        # required (without it the pusher keeps its orientation) but a run without it goes blind.
+        self.wait_until(lambda: self.seen_fresh() and self.camera_inputs() is not None, STARTUP_WAIT)
         if self.observation() is None:
             raise GoalError(Outcome.ROBOT_LOST, "no gripper poses or gripper state from the robot: is the sim bridge "
                             f"(or driver) publishing {self.roles['holder']}/endpoint_pose, "
@@ -313,13 +315,19 @@ class ExecutorNode(Node):
             stamps.append(self.opening[0] if self.opening else -math.inf)
         return self.now() - min(stamps) if len(stamps) == 3 else math.inf
 
-    def camera_model(self) -> CameraModel | None:
+    def camera_inputs(self) -> tuple[CameraInfo, dict] | None:
+        """The latest camera_info and poses, once they hold what the camera model needs."""
         with self.lock:
             info, poses = self.camera_info, dict(self.poses)
-        if info is None or "camera" not in poses or "pusher" not in poses or info.k[0] <= 0:
+        return (info, poses) if info is not None and info.k[0] > 0 and "camera" in poses and "pusher" in poses else None
+
+    def camera_model(self) -> CameraModel | None:
+        inputs = self.camera_inputs()
+        if inputs is None:
             self.get_logger().warning("no camera model yet (camera_info and camera pose): the pusher keeps its "
                                       "orientation instead of keeping the tags in view")
             return None
+        info, poses = inputs
         return CameraModel(np.asarray(info.k, float).reshape(3, 3), int(info.width), int(info.height),
                            invert(poses["pusher"][1]) @ poses["camera"][1])
 
