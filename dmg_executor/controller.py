@@ -526,6 +526,10 @@ class PlanExecutor:
                 return Command(holder_grip=self._loosened(obs))
         return command
 
+    def _next_start_view(self) -> None:
+        """Turn the pusher at the push start to the next best view."""
+        self.push.orientations[-1] = self.push.other_views.pop(0)
+
     def _give_up_push(self, obs: Observation) -> Command:
         """The arm cannot get where the push starts (a joint at its limit): at the push start, turn the
         camera another way; else give the push up, take the pusher back to where it started (its arm
@@ -534,7 +538,7 @@ class PlanExecutor:
             self._enter(Step.FIND_CONTACT, obs)      # not home, but as close as it gets: plan from here
             return Command()
         if self.waypoint == len(self.push.waypoints) - 1 and self.push.other_views:
-            self.push.orientations[-1] = self.push.other_views.pop(0)
+            self._next_start_view()
             return Command()
         self.unreachable.append(self.push.local_direction)
         self.notes.append(f"a push of primitive {self.index} given up: the pusher came no closer to waypoint "
@@ -582,7 +586,7 @@ class PlanExecutor:
         if self.waiting_since is None:
             self.waiting_since = obs.time
         elif obs.time - self.waiting_since > self.settings.stale_after and self.push.other_views:
-            self.push.orientations[-1] = self.push.other_views.pop(0)
+            self._next_start_view()
             self.waiting_since = None
         return Command()
 

@@ -24,6 +24,7 @@ from dmg_planner.transforms import distance, from_rotation, invert
 
 AMBIGUOUS_PX = 1.0   # proposals whose per-tag reprojection errors differ by less than this explain the tags alike
 
+
 class EstimationError(ValueError):
     """A configuration the estimator cannot work with; the message says why."""
 
