@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists
 from dmg_executor.push_points import ObjectSurface, PushError, exit_normals, rotation_push, translation_push
+from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, overlap, placed, ranked_views, turns
@@ -133,6 +134,7 @@ class _Push:
     lever: float              # m, pusher distance from the grasp axis (rotations)
     other_views: list[np.ndarray] = field(default_factory=list)   # next best orientations at the push start
     homeward: bool = False    # not a push: the way back to where the pusher started, to plan afresh from there
+    blind: bool = False       # the camera sees no tag from its start: done on dead reckoning
 
 
 @dataclass
@@ -220,7 +222,10 @@ class PlanExecutor:
         self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
         self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (holder frame) whose start the pusher could not reach
-        self.touch_from = np.zeros(3)     # pusher in the holder's frame where a rotation push began closing its gap
+        self.pushed_from = np.zeros(3)    # pusher in the holder's frame where the current push began
+        self.reckoning: Reckoning | None = None   # the current push's last known object pose
+        self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it
+        self.reckoned_time = -math.inf
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
         self.returning = False
@@ -259,23 +264,42 @@ class PlanExecutor:
     def _tick(self, obs: Observation) -> Command:
         s = self.settings
         # While the grip is closed and nothing pushes, the object cannot move: the camera may lose it
-        # for longer (the pusher's hand turns and passes the object), but never while pushing: a
-        # push whose pose goes stale stops at once with the grip closed, and the pusher backs out
-        # to look again; the run ends only when the held object stays unseen.
-        if obs.object_in_holder is None or obs.time - obs.object_time > s.stale_after_held:
-            age = "never seen" if obs.object_in_holder is None else f"last seen {obs.time - obs.object_time:.2f} s ago"
+        # for a while (the pusher's hand turns and passes the object); the run ends only when the
+        # held object stays unseen. A push goes on by dead reckoning (or, without blind pushes, stops
+        # at once with the grip closed) and counts as seen until it ends; on the way to a push that
+        # starts where the camera sees no tag, the object is not expected to be seen.
+        unseen = obs.time - max(obs.object_time, self.reckoned_time)
+        expected = self.step == Step.APPROACH and self.push is not None and self.push.blind
+        if obs.object_in_holder is None or (unseen > s.stale_after_held and not expected):
+            age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
                                f"during {self.step.name} of primitive {self.index}: stopped with the object held")
         fresh = obs.time - obs.object_time <= s.stale_after
-        if fresh and self.reference_pending:
-            self.held_reference, self.reference_pending = obs.object_in_holder.copy(), False
-        if not fresh and self.step == Step.EXECUTE and self.phase != "tighten":
+        pushing = self.step == Step.EXECUTE and self.phase in ("touch", "push")
+        if pushing and s.blind_pushes:
+            # The last pose moved on by the pusher's motion since its image: the image's latency made
+            # up for, and the push goes on when the camera loses the object.
+            known = self.reckoning
+            known.moved(obs.time, invert(obs.holder) @ obs.pusher)
+            if fresh:
+                known.seen(obs.object_in_holder, obs.object_time)
+            elif not known.blind:
+                known.blind = True
+                self.notes.append(f"a push of primitive {self.index} went on unseen, on dead reckoning")
+            self.reckoned, self.reckoned_time = self._dead_reckoning(obs), obs.time
+        elif not fresh and not s.blind_pushes and self.step == Step.EXECUTE and self.phase != "tighten":
             self.notes.append(f"a push of primitive {self.index} stopped: object unseen for "
                               f"{obs.time - obs.object_time:.2f} s")
             return self._tighten(obs)
+        elif self.reckoned is not None and fresh and obs.object_time >= self.reckoned_time:
+            self.reckoned = None      # seen again after the push
+        if fresh and self.reference_pending and self.reckoned is None:
+            self.held_reference, self.reference_pending = obs.object_in_holder.copy(), False
         fault = self._limits(obs) or self._slip(obs)
         if fault:
             return self._abort(*fault)
+        if self.reckoned is not None:
+            obs = replace(obs, object_in_holder=self.reckoned)    # pushed, not seen since: where it went
         if obs.time - self.step_started > s.step_timeout:
             return self._abort(Outcome.STEP_TIMEOUT, f"{self.step.name} of primitive {self.index} did not finish in "
                                f"{s.step_timeout:.1f} s (contact error {self.errors[0] * 1000:.1f} mm, angle error "
@@ -290,7 +314,8 @@ class PlanExecutor:
         """Start a step with the grip closed: from here the object must not move in it (from the
         next fresh pose on, if the last one is stale: the object moved while unseen)."""
         self.step, self.step_started = step, obs.time
-        self.reference_pending = obs.time - obs.object_time > self.settings.stale_after
+        # (an object pushed unseen is where dead reckoning puts it, not seen there: no reference yet)
+        self.reference_pending = obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None
         self.held_reference = None if self.reference_pending else obs.object_in_holder.copy()
 
     def _find_contact(self, obs: Observation) -> Command:
@@ -440,6 +465,8 @@ class PlanExecutor:
         if self.turns is None:
             return candidates
         watched = [c for c in candidates if c[1] > 0]
+        if not watched and self.settings.blind_pushes:
+            return candidates       # pushed on dead reckoning, looked at after
         if not watched:
             raise PushError("the wrist camera would see none of the object's tags from where the push starts "
                             "(it would need the pusher behind the object)")
@@ -474,7 +501,7 @@ class PlanExecutor:
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
-                     _distinct(views[1:][seen[1:] > 0], views[0])), int(seen[0])
+                     _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])
 
     def _hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders) -> bool:
         """Would the pusher with its tips at `place`, turned `orientation`, have its hand in the holding
@@ -516,12 +543,14 @@ class PlanExecutor:
                 self._enter(Step.FIND_CONTACT, obs)
                 return Command()
             if self.waypoint == len(self.push.waypoints) - 1 and obs.time - obs.object_time > self.settings.stale_after:
-                return self._look_again(obs)     # at the push start: no push before a fresh pose
+                waiting = self._look_again(obs)     # at the push start: a fresh pose first, if any view gives one
+                if waiting is not None:
+                    return waiting
             self.waiting_since = None
             self.waypoint += 1
             if self.waypoint == len(self.push.waypoints):
                 self._enter(Step.EXECUTE, obs)
-                self.phase = "loosen"
+                self.phase, self.pushed_reference = "loosen", None
                 self.grip_until = obs.time + self.settings.grip_settle
                 return Command(holder_grip=self._loosened(obs))
         return command
@@ -580,14 +609,18 @@ class PlanExecutor:
                         look.views.append(obs.pusher[:3, :3].copy())   # nowhere to go: wait here
         return command
 
-    def _look_again(self, obs: Observation) -> Command:
+    def _look_again(self, obs: Observation) -> Command | None:
         """Wait at the push start for a fresh pose; when none comes within `stale_after`, turn the
-        pusher to the next best view (the view model missed something that hides the tags)."""
+        pusher to the next best view (the view model missed something that hides the tags). After
+        the last view, None: push blind from the last pose (held since it was seen), if allowed."""
         if self.waiting_since is None:
             self.waiting_since = obs.time
-        elif obs.time - self.waiting_since > self.settings.stale_after and self.push.other_views:
-            self._next_start_view()
-            self.waiting_since = None
+        elif obs.time - self.waiting_since > self.settings.stale_after:
+            if self.push.other_views:
+                self._next_start_view()
+                self.waiting_since = None
+            elif self.settings.blind_pushes:
+                return None
         return Command()
 
     def _execute(self, obs: Observation) -> Command:
@@ -598,12 +631,17 @@ class PlanExecutor:
                 return Command(holder_grip=self._loosened(obs))
             self.phase, self.held_reference = "push", None
             self.pushed_reference = obs.object_in_holder.copy()
+            pusher = invert(obs.holder) @ obs.pusher
+            self.pushed_from = pusher[:3, 3].copy()
+            self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher,
+                                       float(pusher[:3, 3] @ self.push.local_direction) + s.gap)
+            self.reckoning.moved(obs.time, pusher)
             if primitive.kind == PrimitiveKind.ROTATION:
                 # Close the gap along the push line first: turning from `gap` away, the pusher would
                 # mostly slide past the face (its arc is tangent to the face, not into it).
-                self.phase, self.touch_from = "touch", apply(invert(obs.holder), obs.pusher[:3, 3])
+                self.phase = "touch"
         if self.phase == "touch":
-            closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.touch_from) @ self.push.local_direction)
+            closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from) @ self.push.local_direction)
             if closed < s.gap:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._loosened(obs)
@@ -655,7 +693,7 @@ class PlanExecutor:
     def _leave(self, obs: Observation) -> Command:
         if self.retreat is None:
             # Back out along the push line as the object now lies (a rotation turned it with the pusher).
-            turned = _turned_since(self.pushed_reference, obs.object_in_holder)
+            turned = 0.0 if self.pushed_reference is None else _turned_since(self.pushed_reference, obs.object_in_holder)
             local = Rotation.from_rotvec([turned, 0.0, 0.0]).apply(self.push.local_direction)
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
@@ -773,6 +811,11 @@ class PlanExecutor:
         motion = -where
         motion[0] = 0.0       # along the grasp axis the fingers centre the object
         return motion
+
+    def _dead_reckoning(self, obs: Observation) -> np.ndarray:
+        """The pushed object's pose (holder frame) by the pusher's motion since it was last seen."""
+        translation = self.primitives[self.index].kind == PrimitiveKind.TRANSLATION
+        return self.reckoning.believed(invert(obs.holder) @ obs.pusher, self.push.local_direction if translation else None)
 
     def _measure(self, obs: Observation) -> None:
         if not self.primitives:

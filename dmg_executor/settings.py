@@ -55,6 +55,7 @@ class ExecutorSettings:
     slip_poses: int
     step_timeout: float
     stall_time: float
+    blind_pushes: bool
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":
@@ -66,7 +67,8 @@ class ExecutorSettings:
             else:
                 value = np.deg2rad(float(values[f"{field.name}_deg"]))
             converted[field.name] = (np.asarray(value, float) if field.name.startswith("workspace")
-                                     else int(value) if field.type in (int, "int") else float(value))
+                                     else int(value) if field.type in (int, "int")
+                                     else bool(value) if field.type in (bool, "bool") else float(value))
         settings = cls(**converted)
         settings.validate()
         return settings

@@ -297,23 +297,30 @@ def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loo
     assert np.abs(cell.joint_state().velocity).max() < 0.01
 
 
-def test_a_push_that_loses_sight_of_the_object_stops_held_and_the_run_goes_on_once_it_is_seen(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
-
-    cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
-
+def _half_a_second_into_the_push(loop, executor):
+    """Run the in-process loop until half a second into the first push; return its tick function
+    (perceive=False: the camera sees nothing, a lens cap)."""
     def tick(perceive: bool = True) -> None:
         if perceive:
             loop.perceive()
         loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+        loop.cell.run(loop.control_period)
 
     while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done:
         tick()
-    for _ in range(25):                          # half a second into the push
+    for _ in range(25):
         tick()
+    return tick
+
+
+def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_and_goes_on_once_it_is_seen(
+        loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, blind_pushes=False)
+    tick = _half_a_second_into_the_push(loop, executor)
     pushing_from = cell.object_in_gripper("arm1")
     covered_until = cell.time + 1.5 * executor.settings.stale_after
     while cell.time < covered_until:             # the camera sees nothing (a lens cap)
@@ -326,6 +333,65 @@ def test_a_push_that_loses_sight_of_the_object_stops_held_and_the_run_goes_on_on
     assert outcome.outcome == Outcome.OK, outcome.message
     assert "stopped: object unseen" in outcome.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
+def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_checked_after(loop_parts, box_surface):
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    tick = _half_a_second_into_the_push(loop, executor)
+    pushing_from = cell.object_in_gripper("arm1")
+    while executor.step.name == "EXECUTE" and executor.phase == "push" and not executor.done:
+        tick(perceive=False)                     # the camera sees nothing (a lens cap) until the push ends
+    assert not executor.done, executor.result
+    pushed_to = cell.object_in_gripper("arm1")
+    assert distance(pushing_from, pushed_to)[0] > 0.008                   # the push went on unseen ...
+    believed = executor.reckoned
+    assert believed is not None
+    moved, turned = distance(believed, pushed_to)
+    assert moved < 0.003 and np.rad2deg(turned) < 3.0, (moved, np.rad2deg(turned))   # ... and knew where it went
+    outcome = loop.run(executor, time_limit=120)                           # seen again: checked, corrected
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert "dead reckoning" in outcome.message
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
+def _pose(rotvec=(0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0)) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    matrix = np.eye(4)
+    matrix[:3, :3], matrix[:3, 3] = Rotation.from_rotvec(rotvec).as_matrix(), position
+    return matrix
+
+
+def test_dead_reckoning_turns_the_object_as_far_as_the_pusher_turned_round_the_grasp_axis_since_the_image():
+    from dmg_executor.reckoning import Reckoning
+
+    at_start = _pose(position=(0.0, 0.03, 0.0))                  # the pusher, holder frame
+    known = _pose((0.2, 0.05, 0.0), (0.0, 0.004, -0.002))        # the object when last seen
+    reckoning = Reckoning(known, at_start, contact_at=0.0)
+    reckoning.moved(1.0, at_start)
+    reckoning.moved(2.0, _pose((0.1, 0.0, 0.0), (0.0, 0.031, 0.003)))
+    reckoning.seen(known, at=1.2)     # an image of 1.2 s: it goes with the pusher as it was at 1.0 s
+    now = _pose((0.25, 0.0, 0.0), (0.0, 0.02, 0.01))             # turned 0.25 rad since then, and slid
+    np.testing.assert_allclose(reckoning.believed(now, None), _pose((0.25, 0.0, 0.0)) @ known, atol=1e-12)
+    reckoning.seen(known, at=2.5)     # a later image: the turn counts from the pusher at 2.0 s
+    np.testing.assert_allclose(reckoning.believed(now, None), _pose((0.15, 0.0, 0.0)) @ known, atol=1e-12)
+
+
+def test_dead_reckoning_moves_the_object_along_the_push_only_once_the_gap_is_closed():
+    from dmg_executor.reckoning import Reckoning
+
+    along = np.array([0.0, -1.0, 0.0])
+    known = _pose((0.0, 0.0, 0.3), (0.0, 0.002, 0.001))
+    reckoning = Reckoning(known, _pose(position=(0.0, 0.05, 0.0)), contact_at=-0.044)   # 6 mm gap
+    for travel, expected in ((0.004, 0.0), (0.006, 0.0), (0.016, 0.010)):
+        sideways = _pose(position=(0.0, 0.05 - travel, 0.002))   # sliding across the push moves nothing
+        believed = reckoning.believed(sideways, along)
+        np.testing.assert_allclose(believed[:3, 3], known[:3, 3] + expected * along, atol=1e-12)
+        np.testing.assert_allclose(believed[:3, :3], known[:3, :3], atol=1e-12)
 
 
 def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_home(loop_parts, box_surface):

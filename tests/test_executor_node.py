@@ -181,8 +181,8 @@ def test_covered_camera_aborts_with_object_lost_and_the_object_stays_held(cell):
     handle = cell.send(plan=cell.plan(start, translated(start)), alpha=1.0)
     cell.wait_for_step(2)
     cell.cover.publish(cell.Bool(data=True))
-    try:
-        result = cell.result(handle, timeout=60)
+    try:     # the push goes on by dead reckoning, the pusher looks round, then the run ends
+        result = cell.result(handle, timeout=150)
         assert result.error_code == cell.Action.Result.OBJECT_LOST, result.message
         assert "lost" in result.message and "held" in result.message
         cell.spin(0.5)
