@@ -172,16 +172,14 @@ def _pictures(settings: DemoSettings, bag: Path, summary: dict, output: Path) ->
     """DMG with planned and executed paths, errors over time, manipulability, camera frames."""
     from dmg_bringup.environment import parameter_defaults
     from dmg_bringup.report import camera_frames, frame_sheet, plot_errors, read_run
-    from dmg_planner.library import ObjectLibrary
-    from dmg_planner.graph_parameters import GraphParameters
+    from dmg_planner.library import ObjectLibrary, options_from_parameters
     from dmg_planner.manipulability import manipulability_matrix, save_matrix
     from dmg_planner.pictures import ContactPath, draw_graph
-    from dmg_planner.search import SearchOptions
 
     pictures = {}
-    cache = parameter_defaults("planner")["cache_dir"]
-    library = ObjectLibrary(GraphParameters(seed_resolution=0.0), SearchOptions(),
-                            Path(cache).expanduser() if cache else None)
+    planner = parameter_defaults("planner")
+    library = ObjectLibrary(*options_from_parameters(planner),
+                            Path(planner["cache_dir"]).expanduser() if planner["cache_dir"] else None)
     graph = library.load_config_object(settings.object, wait=True).entry.graph
     library.shutdown()
     record = read_run(bag)

@@ -81,7 +81,8 @@ def _gripper_pose(transform: np.ndarray):
     return GripperPose(transform[:3, 3], Rotation.from_matrix(transform[:3, :3]).as_quat())
 
 
-def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, rng: np.random.Generator) -> list[Pair]:
+def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, rng: np.random.Generator,
+               options) -> list[Pair]:
     """Start/goal pairs from the manipulability matrix near the grasp the cell starts from."""
     from dmg_planner.search import plan
 
@@ -90,7 +91,7 @@ def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, r
         if len(starts) == settings.starts:
             break
         pose = _gripper_pose(_matrix_pose(matrix, int(row)))
-        if plan(graph, pose, pose).success:
+        if plan(graph, pose, pose, options).success:
             starts.append(int(row))
     pairs: list[Pair] = []
     for start_row in starts:
@@ -106,7 +107,8 @@ def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, r
     return pairs[:settings.pairs]
 
 
-def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settings: EvalSettings, index: int):
+def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settings: EvalSettings, index: int,
+             options):
     """One repositioning in the closed loop, judged by ground truth."""
     from dmg_executor.controller import Outcome, PlanExecutor
     from dmg_executor.settings import ExecutorSettings
@@ -127,7 +129,7 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
 
     if loop.seen is None:
         return outcome("NOT_SEEN", "the wrist camera does not see the object's tags at the start")
-    planned = plan(graph, _gripper_pose(invert(loop.seen)), _gripper_pose(pair.goal))
+    planned = plan(graph, _gripper_pose(invert(loop.seen)), _gripper_pose(pair.goal), options)
     if not planned.success:
         return outcome(f"PLAN_{planned.status.name}", planned.message)
     executor = PlanExecutor(ExecutorSettings.defaults(), surface, planned.primitives, planned.principal_finger, alpha,
@@ -224,11 +226,9 @@ def run_eval(args: argparse.Namespace) -> int:
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.views import TagLayout
     from dmg_perception.estimator import ObjectPoseEstimator
-    from dmg_planner.graph_parameters import GraphParameters
-    from dmg_planner.library import ObjectLibrary
+    from dmg_planner.library import ObjectLibrary, options_from_parameters
     from dmg_planner.manipulability import manipulability_matrix
     from dmg_planner.objects import load_object
-    from dmg_planner.search import SearchOptions
     from dmg_planner.transforms import invert
     from dmg_sim_bridge.cell import Cell
 
@@ -244,9 +244,9 @@ def run_eval(args: argparse.Namespace) -> int:
         return 2
     output = Path(settings.output)
     output.mkdir(parents=True, exist_ok=True)
-    cache = parameter_defaults("planner")["cache_dir"]
-    library = ObjectLibrary(GraphParameters(seed_resolution=0.0), SearchOptions(),
-                            Path(cache).expanduser() if cache else None)
+    planner = parameter_defaults("planner")
+    library = ObjectLibrary(*options_from_parameters(planner),
+                            Path(planner["cache_dir"]).expanduser() if planner["cache_dir"] else None)
     models = [load_object(name) for name in settings.objects]
     cell = Cell()
     loop = ClosedLoop(cell, ObjectPoseEstimator(models))
@@ -257,13 +257,14 @@ def run_eval(args: argparse.Namespace) -> int:
             graph = library.load_config_object(model.name, wait=True).entry.graph
             matrix = manipulability_matrix(graph)
             handed_over = invert(cell.reset(model.name).object_in_gripper)
-            pairs = make_pairs(graph, matrix, handed_over, settings, rng)
+            pairs = make_pairs(graph, matrix, handed_over, settings, rng, library.search_defaults)
             print(f"== {model.name}: {len(pairs)} pairs from the manipulability matrix ({len(matrix.matrix)} poses, "
                   f"{matrix.block_sizes.size} blocks)", flush=True)
             surface, tags = ObjectSurface.of(model), TagLayout.of(model)
             for index, pair in enumerate(pairs):
                 for alpha in settings.alphas:
-                    run = run_pair(loop, graph, model, surface, tags, pair, alpha, settings, index)
+                    run = run_pair(loop, graph, model, surface, tags, pair, alpha, settings, index,
+                                   library.search_defaults)
                     runs.append(run)
                     print(f"   pair {index} alpha {alpha}: {'ok  ' if run.success else 'FAIL'} {run.outcome:<22} "
                           f"{run.position_error * 1000:6.2f} mm {run.angle_error_deg:6.2f} deg  "

@@ -76,6 +76,16 @@ class LoadResult:
     entry: LoadedObject | None = None
 
 
+def options_from_parameters(values: dict) -> tuple[GraphParameters, SearchOptions]:
+    """Graph parameters and search options from planner parameters named as in
+    config/planner.yaml (graph.*, search.*): the node's and the ROS-free tools' one reading."""
+    graph = GraphParameters(**{name.split(".", 1)[1]: float(value) for name, value in values.items()
+                               if name.startswith("graph.")})
+    search = SearchOptions(**{name.split(".", 1)[1]: value for name, value in values.items()
+                              if name.startswith("search.")})
+    return graph, search
+
+
 class ObjectLibrary:
     """Objects by id, each with its graph (or the state of its build)."""
 

@@ -30,9 +30,8 @@ from dmg_bringup.parameters import declare_from_config
 from dmg_interfaces.msg import RepositioningPlan
 from dmg_interfaces.srv import LoadObject, PlanRepositioning
 from dmg_planner import ros_conversions as rc
-from dmg_planner.graph import GraphParameters
-from dmg_planner.library import ObjectLibrary, ObjectState
-from dmg_planner.search import PlanStatus, SearchOptions
+from dmg_planner.library import ObjectLibrary, ObjectState, options_from_parameters
+from dmg_planner.search import PlanStatus
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -46,10 +45,7 @@ class PlannerNode(Node):
         began = time.perf_counter()
         values = declare_from_config(self, "planner")
         self.threads = int(values["executor_threads"])
-        graph_defaults = GraphParameters(**{name.split(".", 1)[1]: float(value) for name, value in values.items()
-                                            if name.startswith("graph.")})
-        search_defaults = SearchOptions(**{name.split(".", 1)[1]: value for name, value in values.items()
-                                           if name.startswith("search.")})
+        graph_defaults, search_defaults = options_from_parameters(values)
         self.frame_prefix = values["object_frame_prefix"]
         self.last_planning_time = float("nan")
         self.plans_served = 0
