@@ -11,6 +11,9 @@ Every primitive is done in one or more pushes, each an explicit sequence of step
                 on the remaining contact displacement, or a rotation about the grasp axis at
                 a P-controlled rate, the pusher following the object on its arc - split
                 between the arms by the ECTS coordination alpha; then the grip tightens.
+                While pushing, the object pose is the last seen one moved on by the
+                pusher's motion since its image (reckoning): a push the camera cannot
+                watch goes on blind and the next pose checks it.
   LEAVE         the pusher backs out along the push line.
 
 The target of primitive k is the object pose in the holder's frame that puts the gripper at
@@ -267,9 +270,9 @@ class PlanExecutor:
         # for a while (the pusher's hand turns and passes the object); the run ends only when the
         # held object stays unseen. A push goes on by dead reckoning (or, without blind pushes, stops
         # at once with the grip closed) and counts as seen until it ends; on the way to a push that
-        # starts where the camera sees no tag, the object is not expected to be seen.
+        # starts where the camera sees no tag (and loosening there), the object is not expected to be seen.
         unseen = obs.time - max(obs.object_time, self.reckoned_time)
-        expected = self.step == Step.APPROACH and self.push is not None and self.push.blind
+        expected = self.step in (Step.APPROACH, Step.EXECUTE) and self.push is not None and self.push.blind
         if obs.object_in_holder is None or (unseen > s.stale_after_held and not expected):
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
@@ -620,6 +623,7 @@ class PlanExecutor:
                 self._next_start_view()
                 self.waiting_since = None
             elif self.settings.blind_pushes:
+                self.push.blind = True
                 return None
         return Command()
 
