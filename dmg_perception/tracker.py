@@ -75,9 +75,8 @@ class Tracker:
             else:
                 frame_from_camera = invert(gripper) @ camera
                 result.camera_from_frame = invert(frame_from_camera)
-                prior = self.last_seen.estimate.pose if self.last_seen is not None else None
                 result.estimate = self.estimator.estimate(result.observations, frame_from_camera, self.object_name,
-                                                          prior)
+                                                          self.prior(stamp))
                 if result.estimate is None:
                     known = [o.id for o in result.observations if o.id in self.estimator.tags]
                     result.problem = ("no tag of the object in view" if not known else
@@ -86,6 +85,15 @@ class Tracker:
             self.last_seen = result
         self.last_problem = result.problem
         return result
+
+    def prior(self, stamp: float) -> np.ndarray | None:
+        """The last seen pose, to settle a lone tag's mirror in an image taken at `stamp` - only
+        while it is recent (within lost_timeout): once the object was lost (a reset, a regrasp)
+        it may be anywhere."""
+        seen = self.last_seen
+        if seen is None or stamp - seen.stamp > self.lost_timeout:
+            return None
+        return seen.estimate.pose
 
     def status(self, now: float) -> TrackingStatus:
         """Where tracking stands at receiver time `now`."""

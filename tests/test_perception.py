@@ -188,6 +188,7 @@ def test_tracker_reports_searching_then_lost_when_no_tag_is_seen(cell, estimator
         assert tracker.process(cell.time, grey(cell), received=cell.time).estimate is not None
         cell.run(1 / 30)
     assert tracker.status(cell.time).state == TrackingState.TRACKING
+    assert tracker.prior(cell.time) is not None           # the last pose settles a lone tag's mirror ...
     # A lens cap: the camera's images go black.
     states = []
     for _ in range(30):
@@ -200,6 +201,7 @@ def test_tracker_reports_searching_then_lost_when_no_tag_is_seen(cell, estimator
     assert states[0] == TrackingState.SEARCHING and states[-1] == TrackingState.LOST
     status = tracker.status(cell.time)
     assert status.seconds_since_seen > 0.8 and "object lost: no tag of the object in view" in status.message
+    assert tracker.prior(cell.time) is None               # ... not once the object was lost
 
 
 def test_tracker_reports_lost_when_images_stop_coming(cell, estimator):
