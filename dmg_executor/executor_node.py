@@ -331,17 +331,21 @@ class ExecutorNode(Node):
         return CameraModel(np.asarray(info.k, float).reshape(3, 3), int(info.width), int(info.height),
                            invert(poses["pusher"][1]) @ poses["camera"][1])
 
+    def silence(self) -> float:
+        """Wall-clock seconds since the robot was last heard or a control tick last finished."""
+        return time.monotonic() - max(self.robot_heard, self.tick_finished)
+
     def watchdog(self) -> None:
         """Wall clock: idle state messages, and a run stopped when the robot falls silent."""
         with self.lock:
-            run, silent = self.run, time.monotonic() - max(self.robot_heard, self.tick_finished)
+            run, silent = self.run, self.silence()
         if run is None:
             self.publish_idle_state()
         elif silent > self.settings.robot_timeout and not self.control_lock.locked():
             # Silent robot and no control tick either (with sim time a dead simulator stops them
             # both); while ticks run, the tick's own check of the poses' age (node clock) applies.
             with self.control_lock:
-                silent = time.monotonic() - max(self.robot_heard, self.tick_finished)   # a tick may have just run
+                silent = self.silence()   # a tick may have just run
                 if silent > self.settings.robot_timeout and not run.executor.done:
                     self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
                                                         f"{silent:.1f} s (wall clock): stopped"))
