@@ -52,6 +52,7 @@ HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to wher
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
+TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 
 
 class Step(IntEnum):
@@ -151,6 +152,19 @@ class _Headway:
 
 
 @dataclass
+class _HolderTurn:
+    """The holding gripper turning the object about its finger axis, once the pusher is clear."""
+
+    angle: float                  # rad to turn about the holder's z (its finger axis)
+    back: bool                    # turning back to where the camera sees the object's tags
+    clearing: bool = True         # the pusher still on its way back to where it started
+    turned: float = 0.0           # rad turned so far (summed tick by tick: a half turn has no unique rotation vector)
+    last: np.ndarray | None = None     # holder orientation at the previous tick
+    place: np.ndarray | None = None    # where the grasp frame stays while it turns
+    progress: tuple[float, float] = (0.0, -math.inf)   # (turned, when) at the last headway
+
+
+@dataclass
 class _Look:
     """Looking for the object from where the pusher stands: the orientations left to try, best first."""
 
@@ -224,11 +238,15 @@ class PlanExecutor:
         self.headway: _Headway | None = None
         self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
         self.slip_pose_time = -math.inf
-        self.unreachable: list[np.ndarray] = []   # push directions (holder frame) whose start the pusher could not reach
+        self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.pushed_from = np.zeros(3)    # pusher in the holder's frame where the current push began
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
-        self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it
+        self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
         self.reckoned_time = -math.inf
+        self.holder_turn: _HolderTurn | None = None
+        self.far_side = False           # the holder turned: the pusher faces the side it could not reach
+        self.far_side_pushed = False    # ... and has pushed there: turn back to look
+        self.unseen_from = -math.inf    # being unseen counts from here (turns, blind pushes: expected)
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
         self.returning = False
@@ -270,14 +288,20 @@ class PlanExecutor:
         # for a while (the pusher's hand turns and passes the object); the run ends only when the
         # held object stays unseen. A push goes on by dead reckoning (or, without blind pushes, stops
         # at once with the grip closed) and counts as seen until it ends; on the way to a push that
-        # starts where the camera sees no tag (and loosening there), the object is not expected to be seen.
-        unseen = obs.time - max(obs.object_time, self.reckoned_time)
-        expected = self.step in (Step.APPROACH, Step.EXECUTE) and self.push is not None and self.push.blind
-        if obs.object_in_holder is None or (unseen > s.stale_after_held and not expected):
+        # starts where the camera sees no tag (and loosening there), and while the holder turns the object
+        # or has turned it away, the object is not expected to be seen: the count starts after.
+        blind_push = self.step in (Step.APPROACH, Step.EXECUTE) and self.push is not None and self.push.blind
+        if blind_push or self.holder_turn is not None or self.far_side:
+            self.unseen_from = obs.time
+        unseen = obs.time - max(obs.object_time, self.reckoned_time, self.unseen_from)
+        if obs.object_in_holder is None or unseen > s.stale_after_held:
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
                                f"during {self.step.name} of primitive {self.index}: stopped with the object held")
-        fresh = obs.time - obs.object_time <= s.stale_after
+        # Poses from images taken while the holder turns or has the object turned away are not trusted
+        # (the object seen edge-on or from its back: measured 7-10 mm off); the held pose is known.
+        trusted = self.holder_turn is None and not self.far_side
+        fresh = trusted and obs.time - obs.object_time <= s.stale_after
         pushing = self.step == Step.EXECUTE and self.phase in ("touch", "push")
         if pushing and s.blind_pushes:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
@@ -322,7 +346,11 @@ class PlanExecutor:
         self.held_reference = None if self.reference_pending else obs.object_in_holder.copy()
 
     def _find_contact(self, obs: Observation) -> Command:
-        if self.reference_pending:
+        if self.holder_turn is not None:
+            return self._turn_holder(obs)
+        if self.far_side_pushed:
+            return self._start_holder_turn(obs, back=True)     # to see what the push did
+        if self.reference_pending and not self.far_side:
             return self._look_around(obs)     # a push was stopped unseen: plan the next one from a fresh pose
         self.looking = None
         while self.index < len(self.primitives) and self._primitive_finished():
@@ -331,16 +359,21 @@ class PlanExecutor:
                 self._add_correction(obs)
             self._measure(obs)
         if self.index >= len(self.primitives):
-            return self._finish_plan(obs)
+            return self._start_holder_turn(obs, back=True) if self.far_side else self._finish_plan(obs)
         primitive = self.primitives[self.index]
         try:
             self.push = self._plan_push(primitive, obs)
         except (PushError, RouteError) as error:
+            if self._push_when_turned(primitive, obs):
+                return self._start_holder_turn(obs, back=False)
+            self.far_side_pushed = self.far_side     # (turned, and still no push: turn back)
             # No push can do (the rest of) it: the next primitive aims at its own target from here,
             # and the result says what was left and why.
             self.notes.append(f"primitive {self.index} ({primitive.kind.name.lower()}) left at "
                               f"{self.errors[0] * 1000:.1f} mm, {np.rad2deg(self.errors[1]):.1f} deg: no safe push: {error}")
             self.index, self.pushes = self.index + 1, 0
+            if self.index == len(self.primitives):
+                self._add_correction(obs, failed=primitive.kind)
             return Command()
         outside = [p for p in self.push.waypoints + [self.push.start]
                    if np.any(p < self.settings.workspace_min) or np.any(p > self.settings.workspace_max)]
@@ -351,18 +384,103 @@ class PlanExecutor:
         self._enter(Step.APPROACH, obs)
         return Command()
 
-    def _add_correction(self, obs: Observation) -> None:
+    def _push_when_turned(self, primitive: Primitive, obs: Observation) -> bool:
+        """Would the pusher, back where it started, find a push for `primitive` with the holder turned
+        `holder_turn` about its fingers (the object's far side towards it)? Such a push is done on dead
+        reckoning, so only with blind pushes."""
+        s = self.settings
+        if (s.holder_turn == 0.0 or not s.blind_pushes or self.far_side
+                or not self._clear_of_turn(obs, self.pusher_home[:3, 3])):
+            return False
+        holder = obs.holder.copy()
+        holder[:3, :3] = obs.holder[:3, :3] @ Rotation.from_rotvec([0.0, 0.0, s.holder_turn]).as_matrix()
+        try:
+            self._plan_push(primitive, replace(obs, holder=holder, pusher=self.pusher_home.copy()))
+        except (PushError, RouteError):
+            return False
+        return True
+
+    def _clear_of_turn(self, obs: Observation, place: np.ndarray) -> bool:
+        """Is the pusher's tip at `place` (base frame) out of reach of the object turning about the holder's fingers?"""
+        s = self.settings
+        local = apply(invert(obs.holder), place)
+        body = apply(obs.object_in_holder, self.surface.vertices)
+        reach = max(float(np.hypot(body[:, 0], body[:, 1]).max()), obs.opening / 2 + 2.5 * s.tip_radius)
+        return float(np.hypot(local[0], local[1])) > reach + 2 * s.tip_radius + s.clearance
+
+    def _start_holder_turn(self, obs: Observation, back: bool) -> Command:
+        """The pusher back to where it started, then the holder turns the object: `holder_turn` to show
+        the pusher the far side, or back after the push there."""
+        angle = -self.settings.holder_turn if back else self.settings.holder_turn
+        self.holder_turn = _HolderTurn(angle, back)
+        self.far_side_pushed = False
+        if not back:
+            self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
+                              f"{np.rad2deg(angle):.0f} deg about its fingers for a push on its far side")
+        try:
+            self._head_home(obs)
+        except RouteError as error:
+            return self._abort(Outcome.LIMIT_VIOLATION, f"cannot clear the pusher from the object before the holding "
+                               f"gripper turns it: {error}")
+        self._enter(Step.FIND_CONTACT, obs)
+        return Command()
+
+    def _turn_holder(self, obs: Observation) -> Command:
+        """Clear the pusher, then turn the holder about its finger axis at a P-controlled rate, keeping
+        its grasp frame in place. A turn that stops gaining (the wrist at its limit) goes back."""
+        s, turn = self.settings, self.holder_turn
+        if turn.clearing:
+            stalled = self._stalled(obs)
+            if not (self._arrived(obs) or stalled):
+                return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+            if not stalled and self.waypoint < len(self.push.waypoints) - 1:
+                self.waypoint += 1
+                return Command()
+            if not self._clear_of_turn(obs, obs.pusher[:3, 3]):
+                return self._abort(Outcome.LIMIT_VIOLATION, "the pusher cannot get out of reach of the object "
+                                   "the holding gripper would turn")
+            turn.clearing, turn.place, turn.last = False, obs.holder[:3, 3].copy(), obs.holder[:3, :3].copy()
+            turn.progress = (0.0, obs.time)
+            # The grip is closed: the object stays where it was seen; the next reference is the first
+            # image after the turn back.
+            self.held_reference, self.reference_pending = None, True
+            self.reckoned, self.reckoned_time = obs.object_in_holder.copy(), math.inf
+        current = obs.holder[:3, :3]
+        turn.turned += float(Rotation.from_matrix(turn.last.T @ current).as_rotvec()[2])
+        turn.last = current.copy()
+        left = turn.angle - turn.turned
+        if abs(left) < WAYPOINT_TURN_TOLERANCE:
+            self.holder_turn, self.far_side, self.reckoned_time = None, not turn.back, obs.time
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
+        if abs(turn.turned - turn.progress[0]) > HEADWAY[1]:
+            turn.progress = (turn.turned, obs.time)
+        drift = float(np.linalg.norm(obs.holder[:3, 3] - turn.place))
+        if obs.time - turn.progress[1] > s.stall_time or drift > TURN_DRIFT:
+            why = f"moved {drift * 1000:.0f} mm" if drift > TURN_DRIFT else f"stopped at {np.rad2deg(turn.turned):.0f} deg"
+            if turn.back or turn.angle == 0.0:
+                return self._abort(Outcome.LIMIT_VIOLATION, f"the holding gripper could not turn the object back ({why})")
+            self.notes.append(f"the holding gripper could not turn the object ({why}): turned back")
+            turn.angle, turn.back, turn.progress = 0.0, True, (turn.turned, obs.time)
+            turn.place = obs.holder[:3, 3].copy() if drift <= TURN_DRIFT else turn.place
+            return Command()
+        rate = float(np.clip(s.approach_gain * left, -s.max_angular_speed, s.max_angular_speed))
+        return Command(holder=np.concatenate([s.approach_gain * (turn.place - obs.holder[:3, 3]), rate * current[:, 2]]))
+
+    def _add_correction(self, obs: Observation, failed: PrimitiveKind | None = None) -> None:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,
-        a push also turns it a little): one more translation or rotation to the goal grasp, the larger
-        error first, up to MAX_CORRECTIONS."""
+        a push also turns it): one more translation or rotation to the goal grasp, the larger error
+        first (not the kind that just found no push), up to MAX_CORRECTIONS."""
         s = self.settings
         self.index -= 1
         self._measure(obs)
         self.index += 1
-        position, angle = self.errors[0] / s.position_tolerance, abs(self.errors[1]) / s.angle_tolerance
-        if max(position, angle) <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
+        shares = {PrimitiveKind.TRANSLATION: self.errors[0] / s.position_tolerance,
+                  PrimitiveKind.ROTATION: abs(self.errors[1]) / s.angle_tolerance}
+        shares.pop(failed, None)
+        kind = max(shares, key=shares.get)
+        if shares[kind] <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
             return
-        kind = PrimitiveKind.TRANSLATION if position >= angle else PrimitiveKind.ROTATION
         self.primitives.append(replace(self.primitives[-1], kind=kind))
 
     def _primitive_finished(self) -> bool:
@@ -452,7 +570,7 @@ class PlanExecutor:
     def _watched(self, obs: Observation, pushes: list, occluders: Occluders) -> list[tuple[_Push, int]]:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
         if self.unreachable:
-            directions = np.array([obs.object_in_holder[:3, :3] @ push.direction for push in pushes])
+            directions = np.array([(obs.holder @ obs.object_in_holder)[:3, :3] @ push.direction for push in pushes])
             near = (directions @ np.array(self.unreachable).T >= np.cos(UNREACHABLE_CONE)).any(axis=1)
             if near.all():
                 raise PushError("the pusher could not get to where any push that would do it starts")
@@ -572,7 +690,7 @@ class PlanExecutor:
         if self.waypoint == len(self.push.waypoints) - 1 and self.push.other_views:
             self._next_start_view()
             return Command()
-        self.unreachable.append(self.push.local_direction)
+        self.unreachable.append(self.push.direction)
         self.notes.append(f"a push of primitive {self.index} given up: the pusher came no closer to waypoint "
                           f"{self.waypoint + 1} of {len(self.push.waypoints)} in {self.settings.stall_time:.1f} s")
         try:
@@ -634,6 +752,7 @@ class PlanExecutor:
             if obs.time < self.grip_until:
                 return Command(holder_grip=self._loosened(obs))
             self.phase, self.held_reference = "push", None
+            self.far_side_pushed = self.far_side
             self.pushed_reference = obs.object_in_holder.copy()
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from = pusher[:3, 3].copy()

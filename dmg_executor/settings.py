@@ -56,6 +56,7 @@ class ExecutorSettings:
     step_timeout: float
     stall_time: float
     blind_pushes: bool
+    holder_turn: float             # rad
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":

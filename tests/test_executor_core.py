@@ -428,6 +428,68 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
+def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(loop_parts):
+    from scipy.spatial.transform import Rotation
+
+    from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_executor.controller import Outcome, PlanExecutor
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_executor.views import TagLayout
+    from dmg_perception.estimator import ObjectPoseEstimator
+    from dmg_planner.graph import GraphParameters, build_graph
+    from dmg_planner.objects import load_object
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import distance, invert
+
+    cell = loop_parts[0]
+    model = load_object("bracket")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+    loop = ClosedLoop(cell, ObjectPoseEstimator([model]))
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+
+    def run(**overrides):
+        """The bracket's grasp 15 mm along its -y: the bracket must move 15 mm towards the pusher,
+        pushed on its far side, 60 mm beyond the grasp."""
+        start = invert(cell.reset("bracket").object_in_gripper)
+        goal = start.copy()
+        goal[:3, 3] -= 0.015 * start[:3, 1]
+        result = plan(graph, pose(start), pose(goal))
+        executor = PlanExecutor(ExecutorSettings.defaults(**overrides), ObjectSurface.of(model), result.primitives,
+                                result.principal_finger, 1.0, cell.time, loop.camera_model(), TagLayout.of(model))
+        loop.watch(0.5)
+        return executor
+
+    # Without turning the bracket, the far-side push would put the pusher's hand through gripper 1.
+    executor = run(holder_turn_deg=0.0)
+    refused = loop.run(executor, time_limit=60)
+    assert refused.outcome == Outcome.OUT_OF_TOLERANCE and "into the holding gripper" in refused.message
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] > 0.012
+    executor = run()
+    holder_before = cell.grasp_pose("arm1")
+    turned_while_pushing = []
+    original_update = executor.update
+
+    def recording_update(observation):
+        command = original_update(observation)
+        if executor.step.name == "EXECUTE" and executor.phase == "push":
+            turned_while_pushing.append(
+                Rotation.from_matrix(observation.holder[:3, :3] @ holder_before[:3, :3].T).magnitude())
+        return command
+
+    executor.update = recording_update
+    outcome = loop.run(executor, time_limit=150)
+    assert outcome.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), outcome.message
+    assert "far side" in outcome.message
+    assert np.rad2deg(max(turned_while_pushing)) > 170            # pushed with the bracket turned half round ...
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+    holder_after = cell.grasp_pose("arm1")                        # ... and turned back, in place, held
+    assert np.rad2deg(Rotation.from_matrix(holder_after[:3, :3] @ holder_before[:3, :3].T).magnitude()) < 3.0
+    assert np.linalg.norm(holder_after[:3, 3] - holder_before[:3, 3]) < 0.01
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
 def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loop_parts, box_surface):
     from dataclasses import replace
 
