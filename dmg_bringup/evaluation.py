@@ -63,7 +63,9 @@ class RunOutcome:
     message: str
     primitives: int
     position_error: float    # m, ground truth vs the planned goal grasp (NaN when nothing ran)
-    angle_error_deg: float
+    angle_error_deg: float   # the whole turn between the two grasps ...
+    tilt_deg: float          # ... of which this is the grasp axis tilted (the object turned between the round
+                             # fingertips about an axis no push controls), the rest about the grasp axis
     sim_time: float          # s of the execution
     wall_time: float         # s for the whole run (reset, planning, execution)
     goal_shift_mm: float     # how far the goal grasp is from the start on the object
@@ -121,7 +123,8 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
     loop.watch(settings.settle)
 
     def outcome(name: str, message: str, **values) -> RunOutcome:
-        fields = dict(primitives=0, position_error=math.nan, angle_error_deg=math.nan, sim_time=0.0, success=False)
+        fields = dict(primitives=0, position_error=math.nan, angle_error_deg=math.nan, tilt_deg=math.nan, sim_time=0.0,
+                      success=False)
         fields.update(values)
         shift, turn = distance(pair.start, pair.goal)
         return RunOutcome(model.name, index, alpha, name, message=message, wall_time=time.perf_counter() - began,
@@ -135,12 +138,14 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
     executor = PlanExecutor(ExecutorSettings.defaults(), surface, planned.primitives, planned.principal_finger, alpha,
                             cell.time, loop.camera_model(), tags)
     result = loop.run(executor, settings.time_limit)
-    position, angle = distance(invert(cell.object_in_gripper("arm1")), planned.primitives[-1].gripper_after)
+    reached, goal = invert(cell.object_in_gripper("arm1")), planned.primitives[-1].gripper_after
+    position, angle = distance(reached, goal)
+    tilt = math.degrees(math.acos(float(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
     success = (result.outcome == Outcome.OK and position <= settings.position_tolerance
                and math.degrees(angle) <= settings.angle_tolerance_deg)
     name = result.outcome.name if result.outcome != Outcome.OK or success else "TRUTH_OUT_OF_TOLERANCE"
     return outcome(name, result.message, success=success, primitives=result.primitives_completed,
-                   position_error=position, angle_error_deg=math.degrees(angle), sim_time=result.duration)
+                   position_error=position, angle_error_deg=math.degrees(angle), tilt_deg=tilt, sim_time=result.duration)
 
 
 def summarise(runs: list[RunOutcome]) -> dict:
@@ -149,12 +154,14 @@ def summarise(runs: list[RunOutcome]) -> dict:
         judged = [r for r in group if math.isfinite(r.position_error)]
         positions = np.array([r.position_error for r in judged]) * 1000
         angles = np.array([r.angle_error_deg for r in judged])
+        tilts = np.array([r.tilt_deg for r in judged])
         per_primitive = [r.sim_time / r.primitives for r in group if r.primitives]
         quantiles = lambda v: {q: float(np.percentile(v, p)) for q, p in (("median", 50), ("p90", 90), ("max", 100))} \
             if len(v) else {}   # noqa: E731
         return {"runs": len(group), "successes": sum(r.success for r in group),
                 "success_rate": sum(r.success for r in group) / len(group) if group else math.nan,
                 "position_error_mm": quantiles(positions), "angle_error_deg": quantiles(angles),
+                "tilt_deg": quantiles(tilts),
                 "sim_seconds_per_primitive": quantiles(np.array(per_primitive)),
                 "failures": dict(Counter(r.outcome for r in group if not r.success))}
 
@@ -165,23 +172,25 @@ def summarise(runs: list[RunOutcome]) -> dict:
 
 def markdown(summary: dict, runs: list[RunOutcome]) -> str:
     def row(name: str, s: dict) -> str:
-        pos, ang, ppp = s["position_error_mm"], s["angle_error_deg"], s["sim_seconds_per_primitive"]
+        pos, ang, tilt, ppp = s["position_error_mm"], s["angle_error_deg"], s["tilt_deg"], s["sim_seconds_per_primitive"]
         failures = ", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "-"
         return (f"| {name} | {s['successes']}/{s['runs']} ({s['success_rate'] * 100:.0f} %) | "
                 f"{pos.get('median', math.nan):.2f} / {pos.get('p90', math.nan):.2f} | "
                 f"{ang.get('median', math.nan):.2f} / {ang.get('p90', math.nan):.2f} | "
+                f"{tilt.get('median', math.nan):.2f} / {tilt.get('p90', math.nan):.2f} | "
                 f"{ppp.get('median', math.nan):.1f} | {failures} |")
 
     lines = ["| runs | success | position error median / p90 [mm] | angle error median / p90 [deg] | "
-             "sim s per primitive (median) | failures |", "|---|---|---|---|---|---|",
+             "of it tilt off the grasp axis median / p90 [deg] | sim s per primitive (median) | failures |",
+             "|---|---|---|---|---|---|---|",
              row("all", summary["overall"])]
     lines += [row(f"alpha {a}", s) for a, s in summary["by_alpha"].items()]
     lines += [row(o, s) for o, s in summary["by_object"].items()]
     lines += ["", "| object | pair | goal: shift [mm], turn [deg] | alpha | outcome | primitives | position [mm] | "
-              "angle [deg] | sim s | message |", "|---|---|---|---|---|---|---|---|---|---|"]
+              "angle [deg] | tilt [deg] | sim s | message |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     lines += [f"| {r.object} | {r.pair} | {r.goal_shift_mm:.1f}, {r.goal_turn_deg:.0f} | {r.alpha} | {r.outcome} | "
               f"{r.primitives} | {r.position_error * 1000:.2f} | "
-              f"{r.angle_error_deg:.2f} | {r.sim_time:.1f} | {r.message[:120]} |" for r in runs]
+              f"{r.angle_error_deg:.2f} | {r.tilt_deg:.2f} | {r.sim_time:.1f} | {r.message[:120]} |" for r in runs]
     return "\n".join(lines) + "\n"
 
 
@@ -267,7 +276,7 @@ def run_eval(args: argparse.Namespace) -> int:
                                    library.search_defaults)
                     runs.append(run)
                     print(f"   pair {index} alpha {alpha}: {'ok  ' if run.success else 'FAIL'} {run.outcome:<22} "
-                          f"{run.position_error * 1000:6.2f} mm {run.angle_error_deg:6.2f} deg  "
+                          f"{run.position_error * 1000:6.2f} mm {run.angle_error_deg:6.2f} deg (tilt {run.tilt_deg:5.2f})  "
                           f"{run.primitives} primitive(s) {run.sim_time:5.1f} s sim, {run.wall_time:5.1f} s wall"
                           + ("" if run.success else f"  ({run.message[:100]})"), flush=True)
     finally:

@@ -246,6 +246,7 @@ class PlanExecutor:
         self.holder_turn: _HolderTurn | None = None
         self.far_side = False           # the holder turned: the pusher faces the side it could not reach
         self.far_side_pushed = False    # ... and has pushed there: turn back to look
+        self.may_turn = True            # false once a turn stopped short (the wrist at a limit)
         self.unseen_from = -math.inf    # being unseen counts from here (turns, blind pushes: expected)
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
@@ -389,7 +390,7 @@ class PlanExecutor:
         `holder_turn` about its fingers (the object's far side towards it)? Such a push is done on dead
         reckoning, so only with blind pushes."""
         s = self.settings
-        if (s.holder_turn == 0.0 or not s.blind_pushes or self.far_side
+        if (s.holder_turn == 0.0 or not s.blind_pushes or self.far_side or not self.may_turn
                 or not self._clear_of_turn(obs, self.pusher_home[:3, 3])):
             return False
         holder = obs.holder.copy()
@@ -458,11 +459,11 @@ class PlanExecutor:
         drift = float(np.linalg.norm(obs.holder[:3, 3] - turn.place))
         if obs.time - turn.progress[1] > s.stall_time or drift > TURN_DRIFT:
             why = f"moved {drift * 1000:.0f} mm" if drift > TURN_DRIFT else f"stopped at {np.rad2deg(turn.turned):.0f} deg"
-            if turn.back or turn.angle == 0.0:
+            if turn.back:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"the holding gripper could not turn the object back ({why})")
-            self.notes.append(f"the holding gripper could not turn the object ({why}): turned back")
-            turn.angle, turn.back, turn.progress = 0.0, True, (turn.turned, obs.time)
-            turn.place = obs.holder[:3, 3].copy() if drift <= TURN_DRIFT else turn.place
+            self.notes.append(f"the holding gripper could not turn the object ({why}): turned back, not turned again")
+            self.may_turn = False
+            turn.angle, turn.back, turn.progress, turn.place = 0.0, True, (turn.turned, obs.time), obs.holder[:3, 3].copy()
             return Command()
         rate = float(np.clip(s.approach_gain * left, -s.max_angular_speed, s.max_angular_speed))
         return Command(holder=np.concatenate([s.approach_gain * (turn.place - obs.holder[:3, 3]), rate * current[:, 2]]))

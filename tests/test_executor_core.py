@@ -428,11 +428,14 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
-def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(loop_parts):
+@pytest.fixture(scope="module")
+def far_side_run(loop_parts):
+    """Makes executors for the bracket's grasp 15 mm along its -y: the bracket must move 15 mm towards
+    the pusher, pushed on its far side, 60 mm beyond the grasp (on loop_parts' cell)."""
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
-    from dmg_executor.controller import Outcome, PlanExecutor
+    from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
     from dmg_executor.views import TagLayout
@@ -440,7 +443,7 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     from dmg_planner.graph import GraphParameters, build_graph
     from dmg_planner.objects import load_object
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import distance, invert
+    from dmg_planner.transforms import invert
 
     cell = loop_parts[0]
     model = load_object("bracket")
@@ -449,9 +452,7 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     loop = ClosedLoop(cell, ObjectPoseEstimator([model]))
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
 
-    def run(**overrides):
-        """The bracket's grasp 15 mm along its -y: the bracket must move 15 mm towards the pusher,
-        pushed on its far side, 60 mm beyond the grasp."""
+    def make(**overrides) -> PlanExecutor:
         start = invert(cell.reset("bracket").object_in_gripper)
         goal = start.copy()
         goal[:3, 3] -= 0.015 * start[:3, 1]
@@ -461,12 +462,22 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
         loop.watch(0.5)
         return executor
 
+    return cell, loop, make
+
+
+def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(far_side_run):
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, make = far_side_run
     # Without turning the bracket, the far-side push would put the pusher's hand through gripper 1.
-    executor = run(holder_turn_deg=0.0)
+    executor = make(holder_turn_deg=0.0)
     refused = loop.run(executor, time_limit=60)
     assert refused.outcome == Outcome.OUT_OF_TOLERANCE and "into the holding gripper" in refused.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] > 0.012
-    executor = run()
+    executor = make()
     holder_before = cell.grasp_pose("arm1")
     turned_while_pushing = []
     original_update = executor.update
@@ -487,6 +498,35 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     holder_after = cell.grasp_pose("arm1")                        # ... and turned back, in place, held
     assert np.rad2deg(Rotation.from_matrix(holder_after[:3, :3] @ holder_before[:3, :3].T).magnitude()) < 3.0
     assert np.linalg.norm(holder_after[:3, 3] - holder_before[:3, 3]) < 0.01
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_side_run):
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, make = far_side_run
+    executor = make()
+    holder_before = cell.grasp_pose("arm1")
+    stuck_from = None
+    while not executor.done and cell.time < 200:
+        loop.perceive()
+        command = executor.update(loop.observe())
+        turn = executor.holder_turn
+        if turn is not None and not turn.clearing and not turn.back:
+            stuck_from = cell.time if stuck_from is None else stuck_from
+            if abs(turn.turned) > np.deg2rad(30):     # fault: the holding wrist stops 30 deg into the turn
+                command.holder[:] = 0.0
+        loop.apply(command)
+        cell.run(loop.control_period)
+    assert stuck_from is not None and executor.done
+    outcome = executor.result
+    assert outcome.outcome == Outcome.OUT_OF_TOLERANCE, outcome.message
+    assert "could not turn the object (stopped at" in outcome.message and "into the holding gripper" in outcome.message
+    assert outcome.message.count("turned the object -180 deg") == 1          # tried once
+    holder_after = cell.grasp_pose("arm1")                                    # turned back, held
+    assert np.rad2deg(Rotation.from_matrix(holder_after[:3, :3] @ holder_before[:3, :3].T).magnitude()) < 3.0
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
