@@ -438,8 +438,15 @@ class PlanExecutor:
                 self.waypoint += 1
                 return Command()
             if not self._clear_of_turn(obs, obs.pusher[:3, 3]):
-                return self._abort(Outcome.LIMIT_VIOLATION, "the pusher cannot get out of reach of the object "
-                                   "the holding gripper would turn")
+                if turn.back:
+                    return self._abort(Outcome.LIMIT_VIOLATION, "the pusher cannot get out of reach of the object "
+                                       "the holding gripper must turn back")
+                # Nothing turned yet: that push is given up like any other the pusher cannot get to.
+                self.notes.append("the holding gripper did not turn the object: the pusher could not get out of "
+                                  "its reach")
+                self.holder_turn, self.may_turn = None, False
+                self._enter(Step.FIND_CONTACT, obs)
+                return Command()
             turn.clearing, turn.place, turn.last = False, obs.holder[:3, 3].copy(), obs.holder[:3, :3].copy()
             turn.progress = (0.0, obs.time)
             # The grip is closed: the object stays where it was seen; the next reference is the first
