@@ -509,8 +509,8 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_sid
     cell, loop, make = far_side_run
     executor = make()
     holder_before = cell.grasp_pose("arm1")
-    stuck_from = None
-    while not executor.done and cell.time < 200:
+    stuck_from, ends = None, cell.time + 150
+    while not executor.done and cell.time < ends:
         loop.perceive()
         command = executor.update(loop.observe())
         turn = executor.holder_turn
