@@ -27,6 +27,7 @@ from dmg_bringup.messages import InterfaceError, resolve_type
 from dmg_bringup.ros_verbs import DISCOVERY_WAIT, cli_node, error, spin_for, subscriber_qos
 
 SCHEMA_DIRS = (REPO_ROOT / "msg_schemas" / "msg",)
+DRAIN_LIMIT = 3.0   # s a stopped recorder goes on writing what its subscriptions still hold
 
 
 class BagError(RuntimeError):
@@ -119,6 +120,14 @@ def record(args: argparse.Namespace) -> int:
                 subscribe_new()
                 next_discovery = time.monotonic() + 0.5
             rclpy.spin_once(node, timeout_sec=0.05)
+        # Under load the subscriptions lag the publishers: write what they still hold (the run's last
+        # messages, e.g. the executor's final state) before closing, within the launcher's grace.
+        drain_until = time.monotonic() + DRAIN_LIMIT
+        while time.monotonic() < drain_until and rclpy.ok():
+            written = sum(counts.values())
+            rclpy.spin_once(node, timeout_sec=0.1)
+            if sum(counts.values()) == written:
+                break
         missing = [t for t in args.topics if t not in connections]
         if missing:
             print(f"[bag record] never seen: {', '.join(missing)}", file=sys.stderr)

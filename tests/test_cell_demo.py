@@ -74,6 +74,8 @@ def test_eval_smoke_set_writes_a_consistent_report(tmp_path):
         assert run["object"] == "box" and run["alpha"] == 1.0 and run["outcome"]
         if run["success"]:
             assert run["position_error"] <= 0.003 and run["angle_error_deg"] <= 3.0
+        if run["primitives"]:          # the tilt is part of the whole turn between the grasps
+            assert 0.0 <= run["tilt_deg"] <= run["angle_error_deg"] + 1e-6
     failures = sum(overall["failures"].values())
     assert failures == 2 - overall["successes"]
     assert (tmp_path / "eval.png").stat().st_size > 10_000
