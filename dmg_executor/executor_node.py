@@ -49,6 +49,7 @@ from dmg_planner.transforms import invert
 
 WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
 STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state, the camera model and a fresh object pose
+STATE_HISTORY = 100   # executor/state messages kept per reader (2 s at the 50 Hz control rate)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,7 +121,7 @@ class ExecutorNode(Node):
         self.twist_pubs = {k: self.create_publisher(TwistStamped, f"{p}/cmd_vel", 10) for k, p in self.roles.items()}
         self.grip_pubs = {k: self.create_publisher(GripperCommand, f"{p}/gripper/command", 10)
                           for k, p in self.roles.items()}
-        self.state_pub = self.create_publisher(ExecutorState, "executor/state", 10)
+        self.state_pub = self.create_publisher(ExecutorState, "executor/state", STATE_HISTORY)
         for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
                            ("camera", values["camera_pose_topic"])):
             self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose),
