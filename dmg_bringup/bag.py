@@ -207,7 +207,6 @@ def play(args: argparse.Namespace) -> int:
             return error("bag play", f"cannot replay {conn.topic}: {exc}")
         clock_pub = node.create_publisher(Clock, "/clock", 10) if args.clock else None
         clock_period = 1.0 / args.clock if args.clock else math.inf
-        spin_for(node, args.delay)
         if args.wait_subscribers:
             deadline = time.monotonic() + args.wait_subscribers
             while any(p.get_subscription_count() == 0 for p in publishers.values()):
@@ -216,6 +215,9 @@ def play(args: argparse.Namespace) -> int:
                     return error("bag play", f"no subscriber on {', '.join(idle)} within "
                                              f"{args.wait_subscribers} s", 1)
                 rclpy.spin_once(node, timeout_sec=0.05)
+        # Discovery is two-sided: a subscription we see may not see us yet, and a volatile reader
+        # drops what a writer sent before it matched. The delay comes after the wait for that reason.
+        spin_for(node, args.delay)
         played = 0
         while True:
             clock = None
@@ -269,7 +271,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-l", "--loop", action="store_true", help="replay until interrupted")
     p.add_argument("--topics", nargs="+", help="replay only these topics")
     p.add_argument("--delay", type=float, default=DISCOVERY_WAIT,
-                   help="wait for subscribers to match before the first message [s] (default 1)")
+                   help="wait before the first message, after --wait-subscribers found its subscribers, so they match us too [s] (default 1)")
     p.add_argument("--wait-subscribers", type=float, metavar="TIMEOUT",
                    help="start only when every replayed topic has a subscriber (exit 1 after TIMEOUT s)")
     p.set_defaults(handler=play)
