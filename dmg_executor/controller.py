@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists
+from dmg_executor.grip import tilt_hold_force
 from dmg_executor.push_points import ObjectSurface, PushError, exit_normals, rotation_push, translation_push
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
@@ -52,6 +53,7 @@ HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to wher
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
+SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for pushes within this of its direction
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 
 
@@ -239,7 +241,9 @@ class PlanExecutor:
         self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
         self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
+        self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
         self.pushed_from = np.zeros(3)    # pusher in the holder's frame where the current push began
+        self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
         self.reckoned_time = -math.inf
@@ -320,6 +324,7 @@ class PlanExecutor:
                               f"{obs.time - obs.object_time:.2f} s")
             return self._tighten(obs)
         elif self.reckoned is not None and fresh and obs.object_time >= self.reckoned_time:
+            self._judge_blind_push(obs)
             self.reckoned = None      # seen again after the push
         if fresh and self.reference_pending and self.reckoned is None:
             self.held_reference, self.reference_pending = obs.object_in_holder.copy(), False
@@ -763,9 +768,10 @@ class PlanExecutor:
             self.far_side_pushed = self.far_side
             self.pushed_reference = obs.object_in_holder.copy()
             pusher = invert(obs.holder) @ obs.pusher
-            self.pushed_from = pusher[:3, 3].copy()
+            self.pushed_from, self.pushed_along = pusher[:3, 3].copy(), self.push.local_direction.copy()
             self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher,
-                                       float(pusher[:3, 3] @ self.push.local_direction) + s.gap)
+                                       float(pusher[:3, 3] @ self.push.local_direction) + s.gap
+                                       + self._shortfall(self.push.local_direction))
             self.reckoning.moved(obs.time, pusher)
             if primitive.kind == PrimitiveKind.ROTATION:
                 # Close the gap along the push line first: turning from `gap` away, the pusher would
@@ -918,11 +924,15 @@ class PlanExecutor:
         return Command(pusher=np.concatenate([velocity, angular]))
 
     def _loosened(self, obs: Observation) -> GripCommand:
-        """P control of the finger distance towards just inside the object's width, at the slide force."""
+        """P control of the finger distance towards just inside the object's width, at the slide force,
+        or at what keeps the object's weight from tilting it off the grasp axis if that is more."""
         s = self.settings
         wanted = max(obs.opening - s.slide_squeeze, 0.0)
         opening = obs.opening + s.finger_gain * (wanted - obs.opening)
-        return GripCommand(max(opening, 0.0), s.slide_force)
+        tilt_hold = s.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3],
+                                                         self.surface.centre_of_mass, self.surface.mass,
+                                                         obs.opening, s.grip_friction)
+        return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.slide_force, s.hold_force)))
 
     def _held(self) -> GripCommand:
         return GripCommand(0.0, self.settings.hold_force)
@@ -934,6 +944,31 @@ class PlanExecutor:
     def _target(self) -> np.ndarray:
         """Object pose in the holder's frame that completes the current primitive."""
         return invert(self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after)
+
+    def _judge_blind_push(self, obs: Observation) -> None:
+        """The first pose seen after a blind translation push: if it shows the object moved less than
+        half the tolerance along the push while dead reckoning had it moved further than the
+        tolerance, the pusher never reached the face - the pose it was placed by lay that much short
+        along the push (a small correction would repeat the same miss). Pushes this way from now on
+        count the object as met that much further on."""
+        primitive = self.primitives[min(self.index, len(self.primitives) - 1)]
+        if (primitive.kind != PrimitiveKind.TRANSLATION or self.reckoning is None or not self.reckoning.blind
+                or self.pushed_reference is None):
+            return
+        direction = self.pushed_along
+        believed = float((self.reckoned[:3, 3] - self.pushed_reference[:3, 3]) @ direction)
+        seen = float((obs.object_in_holder[:3, 3] - self.pushed_reference[:3, 3]) @ direction)
+        tolerance = self.settings.position_tolerance
+        if believed > tolerance and seen < tolerance / 2:
+            extra = min(believed - seen, self.settings.gap)
+            self.shortfalls.append((direction.copy(), extra))
+            self.notes.append(f"a blind push of primitive {self.index} did not reach the object (moved {seen * 1000:.1f} "
+                              f"mm, believed {believed * 1000:.1f} mm): pushes that way now reach {extra * 1000:.1f} mm further")
+
+    def _shortfall(self, direction: np.ndarray) -> float:
+        """How much further on than its pose says the object has been met by blind pushes this way (at most `gap`)."""
+        extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= SHORTFALL_COSINE)
+        return min(extra, self.settings.gap)
 
     def _remaining_motion(self, obs: Observation) -> np.ndarray:
         """Object displacement (holder frame) still needed, across the grasp axis only."""

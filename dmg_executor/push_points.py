@@ -34,9 +34,9 @@ class PushPoint:
 
 
 class ObjectSurface:
-    """Ray casting against the object's closed mesh (open3d)."""
+    """Ray casting against the object's closed mesh (open3d), and the mass the grip has to carry."""
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray):
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, mass: float = 0.0):
         mesh = o3d.t.geometry.TriangleMesh()
         mesh.vertex.positions = o3d.core.Tensor(np.asarray(vertices, np.float32))
         mesh.triangle.indices = o3d.core.Tensor(np.asarray(triangles, np.int32))
@@ -44,6 +44,8 @@ class ObjectSurface:
         self.scene.add_triangles(mesh)
         self.vertices = np.asarray(vertices, float)
         self.reach = 2.0 * float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
+        self.mass = float(mass)   # kg
+        self.centre_of_mass = volume_centroid(self.vertices, np.asarray(triangles))
 
     @classmethod
     def of(cls, model) -> ObjectSurface:
@@ -52,7 +54,7 @@ class ObjectSurface:
         if len(mesh.triangles) == 0:
             raise ValueError(f"object '{model.name}': mesh {model.mesh_path} has no triangles")
         scale = {"m": 1.0, "mm": 0.001}.get(model.units, 1.0)
-        return cls(np.asarray(mesh.vertices) * scale, np.asarray(mesh.triangles))
+        return cls(np.asarray(mesh.vertices) * scale, np.asarray(mesh.triangles), model.mass)
 
     def entry(self, target: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """Where a ray aimed along `direction` at `target`, from outside the object, first meets it:
@@ -65,6 +67,18 @@ class ObjectSurface:
             return None
         normal = answer["primitive_normals"].numpy()[0].astype(float)
         return origin + distance * direction, normal / np.linalg.norm(normal)
+
+
+def volume_centroid(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Centre of mass of the solid a closed, outward-wound mesh bounds, at uniform density (sum of
+    the tetrahedra from the origin to each triangle); the vertices' mean where the mesh bounds no
+    volume (open or inside-out)."""
+    corners = vertices[triangles]                                        # (n, 3, 3)
+    volumes = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])) / 6.0
+    total = float(volumes.sum())
+    if not np.isfinite(total) or total <= 1e-12:
+        return vertices.mean(axis=0)
+    return (volumes[:, None] * corners.sum(axis=1) / 4.0).sum(axis=0) / total
 
 
 def _unit(vector, what: str) -> np.ndarray:

@@ -40,6 +40,8 @@ class ExecutorSettings:
     max_push_angle: float          # rad
     hold_force: float
     slide_force: float
+    grip_friction: float
+    tilt_hold_margin: float
     slide_squeeze: float
     grip_settle: float
     position_tolerance: float

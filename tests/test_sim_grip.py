@@ -60,3 +60,35 @@ def test_a_grip_too_weak_for_the_weight_lets_the_box_slide_out(tmp_path):
     for _ in range(int(1.0 / model.opt.timestep)):
         mujoco.mj_step(model, data)
     assert start[2] - data.body("object").xpos[2] > 0.01
+
+
+def test_the_loosened_grip_the_executor_picks_keeps_the_bracket_from_tilting_where_the_bare_balance_does_not():
+    """The bracket hangs off its default grasp: loosened to the force whose friction just balances its
+    weight's turn across the grasp axis it tilts; at the executor's margin over that it stays put."""
+    import math
+
+    from dmg_executor.grip import tilt_hold_force
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.transforms import invert
+    from dmg_sim_bridge.cell import Cell
+
+    settings = ExecutorSettings.defaults()
+    surface = ObjectSurface.of(load_object("bracket"))
+    cell = Cell()
+    try:
+        tilts = {}
+        for margin in (1.0, settings.tilt_hold_margin):
+            cell.reset("bracket")
+            cell.run(0.5)
+            start = cell.object_in_gripper("arm1")
+            balance = tilt_hold_force(start, cell.grasp_pose("arm1")[:3, :3], surface.centre_of_mass, surface.mass,
+                                      cell.opening("arm1"), settings.grip_friction)
+            assert 0.5 < balance < settings.hold_force     # the bracket's weight does turn it: there is something to hold
+            cell.command_gripper("arm1", max(cell.opening("arm1") - settings.slide_squeeze, 0.0), margin * balance)
+            cell.run(2.0)
+            axes = invert(start)[:3, 0], invert(cell.object_in_gripper("arm1"))[:3, 0]
+            tilts[margin] = math.degrees(math.acos(min(1.0, float(axes[0] @ axes[1]))))
+    finally:
+        cell.close()
+    assert tilts[1.0] > 3.0 and tilts[settings.tilt_hold_margin] < 0.5, tilts

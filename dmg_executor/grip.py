@@ -1,0 +1,28 @@
+"""How hard the holding gripper must still squeeze while the object is pushed through it.
+
+Two round fingertips touch the object at two points on the grasp axis, `opening` apart.
+Loosened, their friction resists a turn of the object about any axis across the grasp axis
+with a couple of at most friction x force x opening; the object's weight, hanging off the grasp
+axis, turns it that way with the part of its torque about the grasp's middle across that axis.
+Below the force that balances the two the object tilts off the grasp axis as soon as the grip
+loosens, a tilt no primitive can take back. (The part of the torque about the grasp axis turns
+the object in the plane the primitives work in, and the pushes correct it.)
+"""
+from __future__ import annotations
+
+import numpy as np
+
+GRAVITY = np.array([0.0, 0.0, -9.81])   # m/s^2, base frame (z up)
+NARROWEST_GRASP = 1e-3                  # m: below this the couple is taken as this wide
+
+
+def tilt_hold_force(object_in_holder: np.ndarray, holder_rotation: np.ndarray, centre_of_mass: np.ndarray,
+                    mass: float, opening: float, friction: float) -> float:
+    """Finger force [N] whose friction couple just holds the object's weight from turning it
+    across the grasp axis (x of the holder frame); poses are the object in the holder's frame
+    and the holder's orientation in the base frame, `centre_of_mass` in the object frame."""
+    weight = mass * (holder_rotation.T @ GRAVITY)                        # holder frame
+    arm = object_in_holder[:3, :3] @ centre_of_mass + object_in_holder[:3, 3]
+    torque = np.cross(arm, weight)
+    across = float(np.hypot(torque[1], torque[2]))
+    return across / (friction * max(opening, NARROWEST_GRASP))
