@@ -943,7 +943,12 @@ class PlanExecutor:
     # --- measurements and safety -----------------------------------------------------------------------
     def _target(self) -> np.ndarray:
         """Object pose in the holder's frame that completes the current primitive."""
-        return invert(self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after)
+        return invert(self._primitive.gripper_after)
+
+    @property
+    def _primitive(self) -> Primitive:
+        """The primitive being done (the last one once all are: corrections aim at its goal)."""
+        return self.primitives[min(self.index, len(self.primitives) - 1)]
 
     def _judge_blind_push(self, obs: Observation) -> None:
         """The first pose seen after a blind translation push: if it shows the object moved less than
@@ -951,8 +956,7 @@ class PlanExecutor:
         tolerance, the pusher never reached the face - the pose it was placed by lay that much short
         along the push (a small correction would repeat the same miss). Pushes this way from now on
         count the object as met that much further on."""
-        primitive = self.primitives[min(self.index, len(self.primitives) - 1)]
-        if (primitive.kind != PrimitiveKind.TRANSLATION or self.reckoning is None or not self.reckoning.blind
+        if (self._primitive.kind != PrimitiveKind.TRANSLATION or self.reckoning is None or not self.reckoning.blind
                 or self.pushed_reference is None):
             return
         direction = self.pushed_along
@@ -972,7 +976,7 @@ class PlanExecutor:
 
     def _remaining_motion(self, obs: Observation) -> np.ndarray:
         """Object displacement (holder frame) still needed, across the grasp axis only."""
-        goal_middle = self.primitives[min(self.index, len(self.primitives) - 1)].gripper_after[:3, 3]
+        goal_middle = self._primitive.gripper_after[:3, 3]
         where = apply(obs.object_in_holder, goal_middle)
         motion = -where
         motion[0] = 0.0       # along the grasp axis the fingers centre the object
