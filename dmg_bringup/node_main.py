@@ -9,26 +9,29 @@ from dmg_bringup.environment import apply_ros_environment
 
 
 def run_node(prog: str, description: str, epilog: str, argv: list[str] | None, make_node: Callable,
-             make_executor: Callable | None = None, startup_errors: tuple[type[Exception], ...] = ()) -> int:
+             startup_errors: tuple[type[Exception], ...] = ()) -> int:
     """Run a node until Ctrl-C/SIGTERM. `make_node()` builds it after rclpy.init; the node's
-    `shutdown()` runs before it is destroyed. A startup error of the listed types exits 1 with
-    its message (a configuration the node cannot run with), instead of a traceback."""
+    `shutdown()` runs before it is destroyed. A startup error of the listed types, or a parameter
+    rclpy refuses (wrong type, out of range), exits 1 with its message instead of a traceback."""
     argv = sys.argv[1:] if argv is None else argv
     own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
     argparse.ArgumentParser(prog=prog, description=description, epilog=epilog,
                             formatter_class=argparse.RawDescriptionHelpFormatter).parse_known_args(own)
     apply_ros_environment()
     import rclpy
+    from rclpy.exceptions import InvalidParameterTypeException, ParameterException
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     rclpy.init(args=[prog, *argv])
     try:
         node = make_node()
-    except startup_errors as error:
-        print(f"{prog}: cannot start: {error}", file=sys.stderr)
+    except (*startup_errors, ParameterException) as error:
+        hint = (" (a floating-point parameter needs a decimal point: 30.0, not 30)"
+                if isinstance(error, InvalidParameterTypeException) else "")
+        print(f"{prog}: cannot start: {error}{hint}", file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    executor = make_executor(node) if make_executor else SingleThreadedExecutor()
+    executor = SingleThreadedExecutor()   # not the multi-threaded one: see dmg_bringup.waiting
     executor.add_node(node)
     try:
         executor.spin()

@@ -13,28 +13,29 @@ Parameters: config/executor.yaml (topic prefixes, gains, speeds, limits, toleran
 
 The control loop runs on a timer of the node's clock (simulated time with use_sim_time). One
 goal at a time; a second is rejected. Every way a run ends - done, cancelled, a fault - stops
-both arms and leaves the object gripped at the hold force.
+both arms and leaves the object gripped at the hold force. One thread runs every callback (see
+dmg_bringup.waiting): a goal awaits its run's end while the control tick, the watchdog and the
+subscriptions go on.
 """
 from __future__ import annotations
 
 import math
-import threading
 import time
 from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, TwistStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo
 
 from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_pose
 from dmg_bringup.node_main import run_node
 from dmg_bringup.parameters import declare_from_config
+from dmg_bringup.waiting import wait_until
 from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
@@ -54,8 +55,7 @@ STATE_HISTORY = 100   # executor/state messages kept per reader (2 s at the 50 H
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("executor_node", __doc__, "example: executor_node --ros-args -p use_sim_time:=true",
-                    argv, ExecutorNode, lambda node: MultiThreadedExecutor(num_threads=6),
-                    startup_errors=(ValueError,))
+                    argv, ExecutorNode, startup_errors=(ValueError,))
 
 
 class GoalError(ValueError):
@@ -94,7 +94,7 @@ class Run:
     goal_handle: object
     executor: PlanExecutor
     object_id: str
-    done: threading.Event
+    done: Future            # set by the tick (or the watchdog) that ends the run
     last_feedback: float = -math.inf
     last_step: int = -1
 
@@ -104,9 +104,6 @@ class ExecutorNode(Node):
         super().__init__("executor")
         values = self.values = declare_from_config(self, "executor")
         self.settings = ExecutorSettings.from_values(values)
-        self.group = ReentrantCallbackGroup()
-        self.lock = threading.Lock()            # guards the latest messages and the current run
-        self.control_lock = threading.Lock()    # one executor step at a time (control tick or watchdog)
         self.poses: dict[str, tuple[float, np.ndarray]] = {}    # holder, pusher, camera, object: (stamp, 4x4)
         self.opening: tuple[float, float] | None = None          # (stamp, m)
         self.camera_info: CameraInfo | None = None
@@ -114,7 +111,6 @@ class ExecutorNode(Node):
         self.run: Run | None = None
         self.last_message = ""
         self.last_idle_state = -math.inf
-        self.stopping = threading.Event()
         holder, pusher = values["holder_prefix"], values["pusher_prefix"]
         self.roles = {"holder": holder, "pusher": pusher}
 
@@ -124,27 +120,19 @@ class ExecutorNode(Node):
         self.state_pub = self.create_publisher(ExecutorState, "executor/state", STATE_HISTORY)
         for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
                            ("camera", values["camera_pose_topic"])):
-            self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose),
-                                     50, callback_group=self.group)
+            self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose), 50)
         self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"],
-                                 lambda msg: self.on_pose("object", msg.header, msg.pose.pose), 10,
-                                 callback_group=self.group)
-        self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, 10, callback_group=self.group)
-        self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data,
-                                 callback_group=self.group)
-        self.planner = self.create_client(PlanRepositioning, values["planner_service"], callback_group=self.group)
+                                 lambda msg: self.on_pose("object", msg.header, msg.pose.pose), 10)
+        self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, 10)
+        self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data)
+        self.planner = self.create_client(PlanRepositioning, values["planner_service"])
         self.action = ActionServer(self, ExecuteRepositioning, "execute_repositioning", execute_callback=self.execute,
-                                   goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
-                                   callback_group=self.group)
-        # The tick and the watchdog each in a group of their own: a long tick (push planning) delays the
-        # next one instead of queueing more of them on the control lock, which would take every thread
-        # and starve the pose subscriptions (and so trip the watchdog).
-        self.create_timer(1.0 / values["control_rate"], self.tick, callback_group=MutuallyExclusiveCallbackGroup())
+                                   goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
+        self.create_timer(1.0 / values["control_rate"], self.tick)
         # Wall-clock watchdog: with use_sim_time a dead simulator also stops the clock, and so the tick.
         self.robot_heard = time.monotonic()
-        self.tick_finished = time.monotonic()   # a tick that plans pushes can hold the subscriptions off a while
-        self.create_timer(WATCHDOG_PERIOD, self.watchdog, callback_group=MutuallyExclusiveCallbackGroup(),
-                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.tick_finished = time.monotonic()   # a tick that plans pushes holds the subscriptions off a while
+        self.create_timer(WATCHDOG_PERIOD, self.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"executor up: {holder} holds, {pusher} pushes; control at {values['control_rate']:g} Hz "
                                f"on {values['object_pose_topic']}")
 
@@ -155,51 +143,41 @@ class ExecutorNode(Node):
         except ValueError as error:
             self.get_logger().error(f"{key} pose ignored: {error}", throttle_duration_sec=2.0)
             return
-        with self.lock:
-            self.poses[key] = (seconds(header.stamp), transform)
-            if key in ("holder", "pusher"):
-                self.robot_heard = time.monotonic()
+        self.poses[key] = (seconds(header.stamp), transform)
+        if key in ("holder", "pusher"):
+            self.robot_heard = time.monotonic()
 
     def on_gripper(self, msg: GripperState) -> None:
         if math.isfinite(msg.opening):
-            with self.lock:
-                self.opening = (seconds(msg.header.stamp), float(msg.opening))
+            self.opening = (seconds(msg.header.stamp), float(msg.opening))
 
     def on_camera_info(self, msg: CameraInfo) -> None:
-        with self.lock:
-            self.camera_info = msg
+        self.camera_info = msg
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
     # --- goals ----------------------------------------------------------------------------------
     def on_goal(self, request) -> GoalResponse:
-        with self.lock:
-            busy = self.run is not None
-        if busy:
+        if self.run is not None:
             self.get_logger().warning("goal rejected: a repositioning is already running")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    def execute(self, goal_handle):
+    async def execute(self, goal_handle):
         request = goal_handle.request
         try:
-            executor, object_id = self.prepare(request)
+            executor, object_id = await self.prepare(request)
         except GoalError as error:
             self.get_logger().error(f"goal refused ({error.outcome.name}): {error}")
             goal_handle.abort()
             return self.result(Result(error.outcome, str(error), 0, math.nan, math.nan, 0.0))
-        run = Run(goal_handle, executor, object_id, threading.Event())
-        with self.lock:
-            self.run = run
+        run = Run(goal_handle, executor, object_id, Future())
+        self.run = run
         self.get_logger().info(f"executing {len(executor.primitives)} primitives on '{object_id}' "
                                f"(alpha {executor.alpha:g})")
-        while not run.done.wait(0.1):
-            if self.stopping.is_set() or not self.context.ok():
-                break
-        with self.lock:
-            self.run = None
-        result = run.executor.result or Result(Outcome.CANCELED, "executor shutting down", 0, math.nan, math.nan, 0.0)
+        result = await run.done
+        self.run = None
         self.last_message = result.message
         summary = f"{result.outcome.name}: {result.message} ({result.duration:.1f} s)"
         if result.outcome == Outcome.OK:   # one call site per severity: rclpy refuses to mix them
@@ -221,14 +199,14 @@ class ExecutorNode(Node):
             primitives_completed=result.primitives_completed, final_position_error=float(result.position_error),
             final_angle_error=float(result.angle_error), execution_time=float(result.duration))
 
-    def prepare(self, request) -> tuple[PlanExecutor, str]:
+    async def prepare(self, request) -> tuple[PlanExecutor, str]:
         """Validate the goal, plan if asked, and build the run's executor."""
         alpha = float(request.alpha)
         if not 0.0 <= alpha <= 1.0:
             raise GoalError(Outcome.BAD_REQUEST, f"alpha {alpha} is outside [0, 1]")
         # Right after start-up on a loaded machine some of these come late; the camera model is not
         # required (without it the pusher keeps its orientation) but a run without it goes blind.
-        self.wait_until(lambda: self.seen_fresh() and self.camera_inputs() is not None, STARTUP_WAIT)
+        await wait_until(self, lambda: self.seen_fresh() and self.camera_inputs() is not None, STARTUP_WAIT)
         if self.observation() is None:
             raise GoalError(Outcome.ROBOT_LOST, "no gripper poses or gripper state from the robot: is the sim bridge "
                             f"(or driver) publishing {self.roles['holder']}/endpoint_pose, "
@@ -240,7 +218,7 @@ class ExecutorNode(Node):
         if not plan.primitives:
             if not request.object_id:
                 raise GoalError(Outcome.BAD_REQUEST, "the goal has neither a plan nor an object_id + goal to plan for")
-            plan = self.ask_planner(request)
+            plan = await self.ask_planner(request)
         object_id = plan.object_id or request.object_id
         try:
             primitives = primitives_from_message(plan.primitives)
@@ -254,15 +232,6 @@ class ExecutorNode(Node):
             raise GoalError(Outcome.BAD_REQUEST, str(error)) from None
         return executor, object_id
 
-    def wait_until(self, predicate, seconds: float) -> bool:
-        """Poll `predicate` (wall clock) while the subscriptions fill in, e.g. right after start-up."""
-        deadline = time.monotonic() + seconds
-        while not predicate():
-            if time.monotonic() > deadline or self.stopping.is_set():
-                return False
-            time.sleep(0.02)
-        return True
-
     def object_geometry(self, object_id: str) -> tuple[ObjectSurface, TagLayout]:
         if object_id not in self.objects:
             try:
@@ -275,21 +244,20 @@ class ExecutorNode(Node):
                 raise GoalError(Outcome.BAD_REQUEST, str(error)) from None
         return self.objects[object_id]
 
-    def ask_planner(self, request):
+    async def ask_planner(self, request):
         """Plan from the grasp perception sees now to the goal (PlanRepositioning)."""
         timeout = self.values["planner_timeout"]
         observation = self.observation()
-        if not self.planner.wait_for_service(timeout_sec=timeout):
+        if not await wait_until(self, self.planner.service_is_ready, timeout):
             raise GoalError(Outcome.PLANNING_FAILED, f"planner service '{self.values['planner_service']}' is not "
                             f"available (waited {timeout:g} s)")
         start = invert(observation.object_in_holder)
         plan_request = PlanRepositioning.Request(object_id=request.object_id, start=pose_message(start),
                                                  start_opening=float(observation.opening), goal=request.goal,
                                                  goal_opening=float(request.goal_opening))
-        done = threading.Event()
         future = self.planner.call_async(plan_request)
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout):
+        if not await wait_until(self, future.done, timeout):
+            self.planner.remove_pending_request(future)
             raise GoalError(Outcome.PLANNING_FAILED, f"the planner did not answer within {timeout:g} s")
         response = future.result()
         if not response.success:
@@ -298,8 +266,7 @@ class ExecutorNode(Node):
 
     # --- the control loop ------------------------------------------------------------------------
     def observation(self) -> Observation | None:
-        with self.lock:
-            poses, opening = dict(self.poses), self.opening
+        poses, opening = self.poses, self.opening
         if "holder" not in poses or "pusher" not in poses or opening is None:
             return None
         seen_time, seen = poses.get("object", (-math.inf, None))
@@ -311,15 +278,13 @@ class ExecutorNode(Node):
                 and observation.time - observation.object_time <= self.settings.stale_after)
 
     def robot_age(self) -> float:
-        with self.lock:
-            stamps = [self.poses[k][0] for k in ("holder", "pusher") if k in self.poses]
-            stamps.append(self.opening[0] if self.opening else -math.inf)
+        stamps = [self.poses[k][0] for k in ("holder", "pusher") if k in self.poses]
+        stamps.append(self.opening[0] if self.opening else -math.inf)
         return self.now() - min(stamps) if len(stamps) == 3 else math.inf
 
     def camera_inputs(self) -> tuple[CameraInfo, dict] | None:
         """The latest camera_info and poses, once they hold what the camera model needs."""
-        with self.lock:
-            info, poses = self.camera_info, dict(self.poses)
+        info, poses = self.camera_info, self.poses
         return (info, poses) if info is not None and info.k[0] > 0 and "camera" in poses and "pusher" in poses else None
 
     def camera_model(self) -> CameraModel | None:
@@ -338,37 +303,29 @@ class ExecutorNode(Node):
 
     def watchdog(self) -> None:
         """Wall clock: idle state messages, and a run stopped when the robot falls silent."""
-        with self.lock:
-            run, silent = self.run, self.silence()
+        run, silent = self.run, self.silence()
         if run is None:
             self.publish_idle_state()
-        elif silent > self.settings.robot_timeout and not self.control_lock.locked():
+        elif silent > self.settings.robot_timeout and not run.executor.done:
             # Silent robot and no control tick either (with sim time a dead simulator stops them
             # both); while ticks run, the tick's own check of the poses' age (node clock) applies.
-            with self.control_lock:
-                silent = self.silence()   # a tick may have just run
-                if silent > self.settings.robot_timeout and not run.executor.done:
-                    self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
-                                                        f"{silent:.1f} s (wall clock): stopped"))
+            self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
+                                                f"{silent:.1f} s (wall clock): stopped"))
 
     def tick(self) -> None:
-        with self.lock:
-            run = self.run
-        if run is None:
+        run = self.run
+        if run is None or run.executor.done:
             return
-        with self.control_lock:    # the wall-clock watchdog may end the run at the same time
-            executor = run.executor
-            if executor.done:
-                return
-            if run.goal_handle.is_cancel_requested:
-                command = executor.cancel()
-            elif self.robot_age() > self.settings.robot_timeout:
-                command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
-                                         f"{self.robot_age():.2f} s: stopped")
-            else:
-                command = executor.update(self.observation())
-            self.finish(run, command)
-            self.tick_finished = time.monotonic()
+        executor = run.executor
+        if run.goal_handle.is_cancel_requested:
+            command = executor.cancel()
+        elif self.robot_age() > self.settings.robot_timeout:
+            command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
+                                     f"{self.robot_age():.2f} s: stopped")
+        else:
+            command = executor.update(self.observation())
+        self.finish(run, command)
+        self.tick_finished = time.monotonic()
 
     def finish(self, run: Run, command: Command) -> None:
         """Send a tick's command and progress; when the run has ended, stop and hold once more."""
@@ -377,7 +334,7 @@ class ExecutorNode(Node):
         self.publish_progress(run)
         if executor.done:
             self.publish_command(Command(holder_grip=command.holder_grip))
-            run.done.set()
+            run.done.set_result(executor.result)
 
     def publish_command(self, command: Command) -> None:
         stamp = self.get_clock().now().to_msg()
@@ -424,9 +381,6 @@ class ExecutorNode(Node):
         self.state_pub.publish(msg)
 
     def shutdown(self) -> None:
-        self.stopping.set()
-        with self.lock:
-            run = self.run
+        run = self.run
         if run is not None and self.context.ok():
-            with self.control_lock:
-                self.publish_command(run.executor.cancel("executor_node shutting down"))
+            self.publish_command(run.executor.cancel("executor_node shutting down"))

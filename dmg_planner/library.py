@@ -154,8 +154,12 @@ class ObjectLibrary:
             self._notify(entry)
         if wait:
             entry.done.wait()
-            if entry.state == ObjectState.FAILED:
-                return LoadResult(LoadStatus.BUILD_FAILED, entry.error, entry)
+        return self.outcome(entry)
+
+    def outcome(self, entry: LoadedObject) -> LoadResult:
+        """What loading `entry` has come to so far: OK (ready or still building) or BUILD_FAILED."""
+        if entry.state == ObjectState.FAILED:
+            return LoadResult(LoadStatus.BUILD_FAILED, entry.error, entry)
         return LoadResult(LoadStatus.OK, self.describe(entry), entry)
 
     def _build(self, entry: LoadedObject, shape, began: float) -> None:

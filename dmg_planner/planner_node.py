@@ -9,8 +9,9 @@ Topics:    dmg/graph_markers (visualization_msgs/MarkerArray, transient local): 
 Parameters: config/planner.yaml (declared with descriptions and ranges).
 
 The node only translates: dmg_planner.library holds the objects, builds graphs on a worker
-thread and plans. Requests are served concurrently (reentrant callback group on a
-multi-threaded executor) and every failure is answered with an error code, never raised.
+thread and plans. One thread serves the requests in turn (a plan takes milliseconds; a
+LoadObject that waits for its graph awaits it without holding up the others, see
+dmg_bringup.waiting) and every failure is answered with an error code, never raised.
 """
 from __future__ import annotations
 
@@ -20,23 +21,23 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
 from dmg_bringup.node_main import run_node
 from dmg_bringup.parameters import declare_from_config
+from dmg_bringup.waiting import wait_until
 from dmg_interfaces.msg import RepositioningPlan
 from dmg_interfaces.srv import LoadObject, PlanRepositioning
 from dmg_planner import ros_conversions as rc
-from dmg_planner.library import ObjectLibrary, ObjectState, options_from_parameters
+from dmg_planner.library import LoadStatus, ObjectLibrary, ObjectState, options_from_parameters
 from dmg_planner.search import PlanStatus
 
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("planner_node", __doc__, "example: planner_node --ros-args -p objects:=[box] -p cache_dir:=/tmp/graphs",
-                    argv, PlannerNode, lambda node: MultiThreadedExecutor(num_threads=node.threads))
+                    argv, PlannerNode)
 
 
 class PlannerNode(Node):
@@ -44,7 +45,6 @@ class PlannerNode(Node):
         super().__init__("planner")
         began = time.perf_counter()
         values = declare_from_config(self, "planner")
-        self.threads = int(values["executor_threads"])
         graph_defaults, search_defaults = options_from_parameters(values)
         self.frame_prefix = values["object_frame_prefix"]
         self.last_planning_time = float("nan")
@@ -57,8 +57,8 @@ class PlannerNode(Node):
         self.publish_lock = threading.Lock()
         self.library = ObjectLibrary(graph_defaults, search_defaults, values["cache_dir"] or None,
                                      on_change=self.on_object_change)
-        group = ReentrantCallbackGroup()
         service_qos = QoSProfile(depth=int(values["service_queue_depth"]))
+        group = ReentrantCallbackGroup()   # plans and diagnostics go on while a LoadObject awaits its graph
         self.create_service(LoadObject, "load_object", self.on_load_object, qos_profile=service_qos, callback_group=group)
         self.create_service(PlanRepositioning, "plan_repositioning", self.on_plan, qos_profile=service_qos,
                             callback_group=group)
@@ -73,12 +73,15 @@ class PlannerNode(Node):
                                f"({sum(o.from_cache for o in ready)} from cache), others building")
 
     # --- services ------------------------------------------------------------------------------
-    def on_load_object(self, request, response):
+    async def on_load_object(self, request, response):
         began = time.perf_counter()
         overrides = rc.parameter_overrides(request.parameters)
         try:
             result = self.library.load(request.object_id, request.mesh_path, request.mesh_units, overrides,
-                                       request.replace, request.wait)
+                                       request.replace)
+            if request.wait and result.status == LoadStatus.OK:
+                await wait_until(self, result.entry.done.is_set)
+                result = self.library.outcome(result.entry)
         except Exception as error:  # noqa: BLE001 - the node answers, it never dies on a request
             self.get_logger().error(f"load_object {request.object_id!r} failed: {error!r}")
             response.success, response.error_code, response.message = False, response.BUILD_FAILED, repr(error)

@@ -56,7 +56,27 @@ from dmg_sim_bridge.sim_config import ARM_ROLES  # noqa: E402
 
 RESET_TIMEOUT = 60.0         # s of wall time a reset request waits for the simulation thread
 RESYNC_LAG = 0.5             # s; further behind real time than this, pacing restarts from now
+SLOW_PASS = 0.25             # s (wall) one pass of the loop may take before it is logged with its parts
 IMAGE_QOS = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE)   # reliable: bags and echo get every frame
+
+
+class PassTimer:
+    """Wall time of the named parts of one pass of the simulation loop."""
+
+    def __init__(self) -> None:
+        self.start = self.last = time.monotonic()
+        self.parts: dict[str, float] = {}
+
+    def lap(self, name: str) -> None:
+        now = time.monotonic()
+        self.parts[name] = self.parts.get(name, 0.0) + now - self.last
+        self.last = now
+
+    def total(self) -> float:
+        return self.last - self.start
+
+    def __str__(self) -> str:
+        return ", ".join(f"{name} {seconds:.2f} s" for name, seconds in self.parts.items())
 
 
 @dataclass
@@ -70,7 +90,7 @@ class ResetRequest:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node("sim_bridge_node", __doc__, "example: sim_bridge_node --ros-args -p object:=plug -p camera_rate:=15",
+    return run_node("sim_bridge_node", __doc__, "example: sim_bridge_node --ros-args -p object:=plug -p camera_rate:=15.0",
                     argv, SimBridgeNode, startup_errors=(CellError,))
 
 
@@ -84,7 +104,7 @@ class SimBridgeNode(Node):
         # Built and reset here; from now on only the simulation thread touches it.
         self.cell = Cell()
         self.cell.reset(object_name=self.values["object"])
-        self.statistics = {"real_time_factor": 0.0, "frames": 0, "commands_refused": 0}
+        self.statistics = {"real_time_factor": 0.0, "frames": 0, "commands_refused": 0, "slowest_pass": 0.0}
 
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
@@ -174,23 +194,31 @@ class SimBridgeNode(Node):
         window = (time.monotonic(), cell.time)
         try:
             while not self.stopping.is_set() and rclpy.ok():
+                parts = PassTimer()
                 if self.apply_commands():
                     anchor = (time.monotonic(), cell.time)
                     next_state = next_camera = cell.time
+                parts.lap("commands")
                 cell.step(steps)
+                parts.lap("physics")
                 now = cell.time
                 self.clock_pub.publish(Clock(clock=time_message(now)))
                 if now >= next_state - 1e-9:
                     self.publish_state()
                     next_state += state_period
+                parts.lap("state")
                 if now >= next_camera - 1e-9:
                     image = cell.render()
+                    parts.lap("render")
                     if self.camera_covered:
                         image = np.zeros_like(image)
                     self.publish_camera(image)
+                    parts.lap("image")
                     if recorder is not None:
                         recorder.add(image)
+                        parts.lap("recording")
                     next_camera += camera_period
+                self.note_pass(parts)
                 wall = time.monotonic()
                 if wall - window[0] >= 1.0:
                     self.statistics["real_time_factor"] = (now - window[1]) / (wall - window[0])
@@ -208,6 +236,14 @@ class SimBridgeNode(Node):
             if recorder is not None:
                 recorder.close()
             cell.close()
+
+    def note_pass(self, parts: "PassTimer") -> None:
+        """Log a pass of the loop that held every topic back (other nodes see the robot fall silent)."""
+        total = parts.total()
+        self.statistics["slowest_pass"] = max(self.statistics["slowest_pass"], total)
+        if total > SLOW_PASS:
+            self.get_logger().warning(f"one simulation pass took {total:.2f} s (wall): {parts}",
+                                      throttle_duration_sec=1.0)
 
     def apply_commands(self) -> bool:
         """Apply every queued command in order; True when the scene was reset."""
@@ -286,7 +322,8 @@ class SimBridgeNode(Node):
             status.level, status.message = DiagnosticStatus.OK, "running"
         values = {"object": self.cell.object.name, "sim_time": f"{self.cell.time:.3f}",
                   "real_time_factor": f"{achieved:.3f}", "camera_frames": str(self.statistics["frames"]),
-                  "commands_refused": str(self.statistics["commands_refused"])}
+                  "commands_refused": str(self.statistics["commands_refused"]),
+                  "slowest_pass": f"{self.statistics['slowest_pass']:.3f}"}
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()

@@ -54,6 +54,11 @@ class Client:
         request.options.principal_finger = principal
         return self.call_all(self.plan_client, [request])[0]
 
+    def spin(self, seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
     def load(self, **fields):
         return self.call_all(self.load_client, [self.LoadObject.Request(**fields)], timeout=120)[0]
 
@@ -210,13 +215,16 @@ def test_every_error_code_is_reachable_and_the_node_keeps_serving(planner, graph
     p, q = hint.regrasp_pose.position, hint.regrasp_pose.orientation
     assert client.plan("box", GripperPose(np.array([p.x, p.y, p.z]), np.array([q.x, q.y, q.z, q.w])), side).success
     assert client.plan("box", top, top, principal=5).error_code == response.BAD_REQUEST
-    # NOT_READY: a fine graph of a new object is still building when the plan arrives.
-    loaded = client.load(object_id="fine_box", mesh_path=str(load_object("box").mesh_path), wait=False,
-                         parameters=graph_parameters(seed_resolution=0.003, voxel_resolution=0.0005))
-    assert loaded.success, loaded.message
+    # NOT_READY: a fine graph of a new object is still building when the plan arrives; the
+    # LoadObject that waits for that graph holds up no other request meanwhile.
+    waiting = client.load_client.call_async(client.LoadObject.Request(
+        object_id="fine_box", mesh_path=str(load_object("box").mesh_path), wait=True,
+        parameters=graph_parameters(seed_resolution=0.003, voxel_resolution=0.0005)))
+    client.spin(1.0)
     early = client.plan("fine_box", top, top)
     assert early.error_code == response.NOT_READY and "being built" in early.message
     assert client.plan("box", top, grasp_pose(box, [0.02, 0.01, 0.02], 0.0)).success
+    assert not waiting.done(), "the LoadObject with wait answered before its graph was built"
     assert process.poll() is None
 
 

@@ -165,8 +165,9 @@ def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
     assert process.poll() is None, processes.output(process)
     assert np.linalg.norm(position(client.latest["/arm2/endpoint_pose"]) - before) < 1e-4
     assert client.latest["/arm1/gripper/state"].opening == pytest.approx(0.060, abs=0.001)   # still holding
-    refused = {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}["commands_refused"]
-    assert int(refused) >= 4
+    values = {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}
+    assert int(values["commands_refused"]) >= 4
+    assert float(values["slowest_pass"]) > 0.0          # the loop's slowest pass is reported (seconds)
 
 
 def test_reset_holds_the_requested_object_at_the_requested_pose_and_refuses_bad_requests(bridge):
@@ -218,3 +219,12 @@ def test_an_unknown_start_object_exits_with_the_reason():
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
     assert "cannot start: unknown object 'no_such_object'" in result.stderr
+
+
+@pytest.mark.parametrize("argument, words", [("camera_rate:=30", "needs a decimal point"),
+                                             ("camera_rate:=500.0", "out of range")])
+def test_a_refused_parameter_exits_with_the_reason(argument, words):
+    result = subprocess.run([DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args", "-p", argument],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and "cannot start" in result.stderr and words in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr

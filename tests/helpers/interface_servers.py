@@ -9,7 +9,6 @@ import time
 
 import rclpy
 from rclpy.action import ActionServer
-from rclpy.executors import MultiThreadedExecutor
 
 from dmg_bringup.messages import to_plain
 from dmg_interfaces.action import ExecuteRepositioning
@@ -61,6 +60,6 @@ node.create_service(ResetScene, "/reset", reset)
 ActionServer(node, ExecuteRepositioning, "/execute", execute)
 print("serving", flush=True)
 try:
-    rclpy.spin(node, executor=MultiThreadedExecutor())
+    rclpy.spin(node)
 except KeyboardInterrupt:
     pass
