@@ -36,7 +36,7 @@ from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState
 from dmg_planner.objects import load_object, object_names
 
-POSE_WAIT = 0.1   # s (wall) an image waits for the camera and gripper poses of its time stamp
+INPUT_WAIT = 0.1   # s (wall) an image waits for the camera and gripper poses of its time stamp (and camera_info)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -130,18 +130,20 @@ class PerceptionNode(Node):
             self.get_logger().error(f"image skipped: {error}", throttle_duration_sec=2.0)
             return
         stamp = seconds(msg.header.stamp)
-        self.wait_for_poses(stamp)
+        self.wait_for_inputs(stamp)
         with self.lock:
             result = self.tracker.process(stamp, grey, self.now())
         self.publish_result(msg, result, grey)
 
-    def wait_for_poses(self, stamp: float) -> None:
-        """Poses sent with an image can arrive after it (a busy machine): wait for them a little."""
-        deadline = time.monotonic() + POSE_WAIT
+    def wait_for_inputs(self, stamp: float) -> None:
+        """Poses sent with an image can arrive after it (a busy machine), and so can the first
+        camera_info (it is sent after the image): wait for them a little."""
+        deadline = time.monotonic() + INPUT_WAIT
         while time.monotonic() < deadline and not self.stopping.is_set():
             with self.lock:
                 newest = [buffer.latest_time for buffer in (self.tracker.camera_poses, self.tracker.gripper_poses)]
-            if all(t is not None and t >= stamp for t in newest):
+                calibrated = self.tracker.estimator.intrinsics is not None
+            if calibrated and all(t is not None and t >= stamp for t in newest):
                 return
             time.sleep(0.005)
 
