@@ -28,6 +28,7 @@ from dmg_bringup.ros_verbs import DISCOVERY_WAIT, cli_node, error, spin_for, sub
 
 SCHEMA_DIRS = (REPO_ROOT / "msg_schemas" / "msg",)
 DRAIN_LIMIT = 3.0   # s a stopped recorder goes on writing what its subscriptions still hold
+RECORDER_NODE = "dmg_bag_record"   # `bag record`'s node name (+ _<pid>): others can see it subscribed
 
 
 class BagError(RuntimeError):
@@ -83,7 +84,7 @@ def record(args: argparse.Namespace) -> int:
     writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
     if args.compression == "zstd":
         writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)   # MCAP chunk compression
-    with cli_node("dmg_bag_record") as node, writer:
+    with cli_node(RECORDER_NODE) as node, writer:
         connections: dict[str, object] = {}
         counts: dict[str, int] = {}
         subscriptions = []

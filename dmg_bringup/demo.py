@@ -102,8 +102,12 @@ def run_demo(args: argparse.Namespace) -> int:
     return 0 if summary.get("success") else 1
 
 
+RECORDER_WAIT = 30.0   # s a run waits for the bag recorder to subscribe to the executor's state
+
+
 def _operate(settings: DemoSettings, launcher) -> dict:
     """Reset, plan, execute, judge: what an operator does, over ROS."""
+    from dmg_bringup.bag import RECORDER_NODE
     from dmg_bringup.cell_client import CellClient, CellError
     from dmg_bringup.geometry_messages import transform_from_pose
     from dmg_bringup.monitor import ProgressLines, StateSample
@@ -122,7 +126,10 @@ def _operate(settings: DemoSettings, launcher) -> dict:
             cell.wait_until_ready(settings.ready_timeout)
             cell.reset(settings.object)
             print(f"cell ready in {time.monotonic() - began:.0f} s; {settings.object} held in gripper 1", flush=True)
-            time.sleep(1.0)     # the recorder subscribes to new topics every 0.5 s
+            if not cell.wait_for_subscriber("/executor/state", RECORDER_NODE, RECORDER_WAIT):
+                print(f"warning: the bag recorder did not subscribe to /executor/state within "
+                      f"{RECORDER_WAIT:g} s; the bag may lack the run's first states", flush=True)
+            time.sleep(0.5)     # its subscriptions matched by the publishers too (discovery reaches all alike)
             start = cell.perceived_grasp()
             goal = goal_grasp(start, settings.turn_deg, settings.shift)
             response = cell.plan(settings.object, start, goal)

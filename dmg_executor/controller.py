@@ -91,6 +91,7 @@ class Observation:
     object_in_holder: np.ndarray | None      # 4x4 latest perceived object pose in the holder's frame
     object_time: float                       # s, when that pose was seen (-inf: never)
     opening: float                           # m between the holder's fingertips
+    object_tilt_sigma: float = 0.0           # rad, that pose's standard deviation of turn off the grasp axis
 
 
 @dataclass
@@ -174,6 +175,16 @@ class _Look:
     views: list[np.ndarray]
     since: float | None = None    # when the pusher settled in the current view
     homeward: bool = False        # all views tried: on the way back to where the run started
+
+
+def tilt_sigma(covariance: np.ndarray) -> float:
+    """rad: how uncertain a pose (holder frame) is in its turn off the grasp axis x - the larger
+    standard deviation of rotation about y and z, from its 6x6 covariance over (x, y, z, rotation
+    about x, y, z); inf if the covariance is not finite."""
+    block = np.asarray(covariance, float).reshape(6, 6)[4:6, 4:6]
+    if not np.all(np.isfinite(block)):
+        return math.inf
+    return float(np.sqrt(max(float(np.linalg.eigvalsh(block)[-1]), 0.0)))
 
 
 def _rotation_about_axis(rotation: np.ndarray) -> float:
@@ -1034,7 +1045,8 @@ class PlanExecutor:
         return fault if self.slip_poses >= self.settings.slip_poses else None
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
-        """What the latest pose shows: the object moved in the closed grip, or tilted while pushed."""
+        """What the latest pose shows: the object moved in the closed grip, or tilted while pushed (by a
+        pose certain enough of its tilt to tell)."""
         s = self.settings
         if self.held_reference is not None:
             moved, turned = distance(self.held_reference, obs.object_in_holder)
@@ -1044,9 +1056,10 @@ class PlanExecutor:
         elif self.pushed_reference is not None:
             change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
             tilt = float(np.linalg.norm(change[1:]))
-            if tilt > s.slip_angle:
+            if tilt > s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
                 return Outcome.SLIP, (f"the pushed object tilted {np.rad2deg(tilt):.1f} deg off the grasp axis "
-                                      f"during primitive {self.index}")
+                                      f"during primitive {self.index} (that pose's uncertainty "
+                                      f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
         return None
 
     def _abort(self, outcome: Outcome, message: str) -> Command:

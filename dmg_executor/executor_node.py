@@ -36,7 +36,7 @@ from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_
 from dmg_bringup.node_main import run_node
 from dmg_bringup.parameters import declare_from_config
 from dmg_bringup.waiting import wait_until
-from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result
+from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result, tilt_sigma
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, TagLayout
@@ -106,6 +106,7 @@ class ExecutorNode(Node):
         self.settings = ExecutorSettings.from_values(values)
         self.poses: dict[str, tuple[float, np.ndarray]] = {}    # holder, pusher, camera, object: (stamp, 4x4)
         self.opening: tuple[float, float] | None = None          # (stamp, m)
+        self.object_tilt_sigma = 0.0                              # rad, of the latest object pose
         self.camera_info: CameraInfo | None = None
         self.objects: dict[str, tuple[ObjectSurface, TagLayout]] = {}
         self.run: Run | None = None
@@ -121,8 +122,7 @@ class ExecutorNode(Node):
         for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
                            ("camera", values["camera_pose_topic"])):
             self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose), 50)
-        self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"],
-                                 lambda msg: self.on_pose("object", msg.header, msg.pose.pose), 10)
+        self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"], self.on_object_pose, 10)
         self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, 10)
         self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data)
         self.planner = self.create_client(PlanRepositioning, values["planner_service"])
@@ -137,15 +137,21 @@ class ExecutorNode(Node):
                                f"on {values['object_pose_topic']}")
 
     # --- inputs ---------------------------------------------------------------------------
-    def on_pose(self, key: str, header, pose) -> None:
+    def on_pose(self, key: str, header, pose) -> bool:
+        """Keep a pose (False: refused, logged)."""
         try:
             transform = transform_from_pose(pose, key)
         except ValueError as error:
             self.get_logger().error(f"{key} pose ignored: {error}", throttle_duration_sec=2.0)
-            return
+            return False
         self.poses[key] = (seconds(header.stamp), transform)
         if key in ("holder", "pusher"):
             self.robot_heard = time.monotonic()
+        return True
+
+    def on_object_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        if self.on_pose("object", msg.header, msg.pose.pose):
+            self.object_tilt_sigma = tilt_sigma(np.asarray(msg.pose.covariance))
 
     def on_gripper(self, msg: GripperState) -> None:
         if math.isfinite(msg.opening):
@@ -270,7 +276,8 @@ class ExecutorNode(Node):
         if "holder" not in poses or "pusher" not in poses or opening is None:
             return None
         seen_time, seen = poses.get("object", (-math.inf, None))
-        return Observation(self.now(), poses["holder"][1], poses["pusher"][1], seen, seen_time, opening[1])
+        return Observation(self.now(), poses["holder"][1], poses["pusher"][1], seen, seen_time, opening[1],
+                           self.object_tilt_sigma)
 
     def seen_fresh(self) -> bool:
         observation = self.observation()

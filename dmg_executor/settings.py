@@ -55,6 +55,7 @@ class ExecutorSettings:
     slip_distance: float
     slip_angle: float              # rad
     slip_poses: int
+    slip_tilt_sigma: float         # rad
     step_timeout: float
     stall_time: float
     blind_pushes: bool

@@ -115,6 +115,17 @@ def test_the_tilt_hold_force_balances_the_weights_turn_across_the_grasp_axis():
     assert tilt_hold_force(turned, fingers_down, np.array([0.01, 0.0, 0.0]), 0.1, 0.02, 0.5) == pytest.approx(0.0, abs=1e-9)
 
 
+def test_tilt_sigma_reads_the_turn_off_the_grasp_axis_from_a_pose_covariance():
+    from dmg_executor.controller import tilt_sigma
+
+    covariance = np.diag([1e-6, 1e-6, 1e-6, 0.5**2, 0.02**2, 0.01**2])   # about x (the grasp axis) does not count
+    assert tilt_sigma(covariance) == pytest.approx(0.02)
+    covariance[4:6, 4:6] = [[0.02**2, 0.02**2 * 0.9], [0.02**2 * 0.9, 0.02**2]]   # correlated: the larger axis
+    assert tilt_sigma(covariance) == pytest.approx(0.02 * np.sqrt(1.9))
+    covariance[5, 5] = np.nan
+    assert tilt_sigma(covariance.ravel()) == np.inf
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
@@ -632,3 +643,36 @@ def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loo
         tick(0.014)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_tilt(loop_parts, box_surface):
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    tilted = Rotation.from_rotvec([0.0, np.deg2rad(9.0), 0.0]).as_matrix()    # about holder y: off the grasp axis
+
+    def tick(sigma_deg: float | None = None) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        if sigma_deg is not None:     # freshly seen 9 deg tilted, this uncertain in its tilt
+            pose = observation.object_in_holder.copy()
+            pose[:3, :3] = tilted @ pose[:3, :3]
+            observation = replace(observation, object_in_holder=pose, object_time=observation.time,
+                                  object_tilt_sigma=np.deg2rad(sigma_deg))
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done:
+        tick()
+    for _ in range(3 * executor.settings.slip_poses):      # a lone tag seen obliquely: 4 deg uncertain
+        tick(4.0)
+    assert not executor.done, executor.result
+    for _ in range(executor.settings.slip_poses):
+        tick(0.5)
+    assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
+    assert "tilted 9.0 deg" in executor.result.message and "uncertainty 0.5 deg" in executor.result.message
