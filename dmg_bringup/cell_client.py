@@ -48,11 +48,10 @@ class CellClient:
             listener(msg)
 
     def wait_for_subscriber(self, topic: str, node_name: str, timeout: float) -> bool:
-        """Wait until a node named `node_name` (or `node_name`_<pid>) subscribes to `topic`; False if
-        none did within `timeout` s. A volatile subscriber that comes late misses what was sent before."""
+        """Wait until the node `node_name` subscribes to `topic`; False if it did not within `timeout` s.
+        A volatile subscriber that comes late misses what was sent before."""
         def subscribed() -> bool:
-            return any(info.node_name == node_name or info.node_name.startswith(f"{node_name}_")
-                       for info in self.node.get_subscriptions_info_by_topic(topic))
+            return any(info.node_name == node_name for info in self.node.get_subscriptions_info_by_topic(topic))
         try:
             self.wait_for(subscribed, timeout, f"a subscriber {node_name} on {topic}")
         except CellError:

@@ -126,7 +126,9 @@ def _operate(settings: DemoSettings, launcher) -> dict:
             cell.wait_until_ready(settings.ready_timeout)
             cell.reset(settings.object)
             print(f"cell ready in {time.monotonic() - began:.0f} s; {settings.object} held in gripper 1", flush=True)
-            if not cell.wait_for_subscriber("/executor/state", RECORDER_NODE, RECORDER_WAIT):
+            # Its exact name (pid): a recorder of an earlier run can linger in the ROS graph for a while.
+            recorder = f"{RECORDER_NODE}_{launcher.processes['recorder'].pid}"
+            if not cell.wait_for_subscriber("/executor/state", recorder, RECORDER_WAIT):
                 print(f"warning: the bag recorder did not subscribe to /executor/state within "
                       f"{RECORDER_WAIT:g} s; the bag may lack the run's first states", flush=True)
             time.sleep(0.5)     # its subscriptions matched by the publishers too (discovery reaches all alike)

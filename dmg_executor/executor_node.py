@@ -28,7 +28,7 @@ from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, Twi
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo
 
@@ -50,7 +50,10 @@ from dmg_planner.transforms import invert
 
 WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
 STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state, the camera model and a fresh object pose
-STATE_HISTORY = 100   # executor/state messages kept per reader (2 s at the 50 Hz control rate)
+# executor/state: the last 100 messages (2 s at the 50 Hz control rate) kept for readers that lag and,
+# transient local, handed to one that matches late - a bag recorder matched ~1 s after it subscribed
+# lost a run's first states (measured in the demo); a volatile reader (`dmg monitor`) gets no history.
+STATE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -118,7 +121,7 @@ class ExecutorNode(Node):
         self.twist_pubs = {k: self.create_publisher(TwistStamped, f"{p}/cmd_vel", 10) for k, p in self.roles.items()}
         self.grip_pubs = {k: self.create_publisher(GripperCommand, f"{p}/gripper/command", 10)
                           for k, p in self.roles.items()}
-        self.state_pub = self.create_publisher(ExecutorState, "executor/state", STATE_HISTORY)
+        self.state_pub = self.create_publisher(ExecutorState, "executor/state", STATE_QOS)
         for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
                            ("camera", values["camera_pose_topic"])):
             self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose), 50)
