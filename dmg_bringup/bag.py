@@ -95,6 +95,10 @@ def record(args: argparse.Namespace) -> int:
                     continue
                 if args.all and topic in ("/rosout", "/parameter_events"):
                     continue
+                if not node.get_publishers_info_by_topic(topic):
+                    # Only a subscriber has named it so far: the QoS to record with (reliable? latched?)
+                    # comes from the publishers, so wait for the next pass rather than guess best effort.
+                    continue
                 try:
                     msg_cls = resolve_type(types[0])
                     qos = subscriber_qos(node, topic, depth=1000)

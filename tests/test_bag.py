@@ -114,6 +114,27 @@ def test_play_publishes_clock_when_asked(recorded_bag):
     assert ns == sorted(ns) and abs(ns[0] - start_ns) < 5 * 10**9  # bag time, not wall time of replay
 
 
+def test_record_takes_the_publishers_qos_even_when_a_subscriber_named_the_topic_first(processes, tmp_path):
+    """A latched topic is recorded latched with its history, though only a subscriber named it at first."""
+    from rosbags.rosbag2.metadata import QosDurability, QosReliability
+    bag = tmp_path / "latched"
+    processes.start([DMG, "topic", "echo", "/latched", "std_msgs/msg/Int32", "--timeout", "60"])
+    recorder = processes.start([DMG, "bag", "record", "-o", str(bag), "/latched"])
+    time.sleep(2.0)  # several discovery passes of the recorder with a subscriber and no publisher
+    # Publishes 0..4 at once, then stays up 3 s: the recorder must subscribe late and get them as history.
+    talker = processes.start(helper_command("talker.py", "--topic", "/latched", "--latched", "--count", "5",
+                                            "--gaps", "0.01", "0.01", "0.01", "0.01", "3.0", "--start-delay", "0"))
+    talker.wait(timeout=60)
+    recorder.send_signal(signal.SIGINT)
+    out, err = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, out + err
+    with Reader(bag) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == "/latched"]
+        (qos,) = conn.ext.offered_qos_profiles
+    assert qos.reliability == QosReliability.RELIABLE and qos.durability == QosDurability.TRANSIENT_LOCAL
+    assert [m.data for _, m in _bag_messages(bag, "/latched")] == list(range(5))
+
+
 def test_bad_bags_fail_clearly(tmp_path):
     result = dmg("bag", "info", str(tmp_path / "missing"))
     assert result.returncode == 2 and "not a rosbag2 bag" in result.stderr

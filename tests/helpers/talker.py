@@ -7,7 +7,7 @@ import argparse
 import time
 
 import rclpy
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int32
 
 parser = argparse.ArgumentParser()
@@ -17,11 +17,14 @@ parser.add_argument("--gaps", type=float, nargs="+", default=[0.05])
 parser.add_argument("--start-delay", type=float, default=1.0)
 parser.add_argument("--forever", action="store_true", help="keep publishing the last value")
 parser.add_argument("--wait-subscribers", type=int, default=0, help="first wait for this many subscribers")
+parser.add_argument("--latched", action="store_true", help="transient-local durability")
 args = parser.parse_args()
 
 rclpy.init()
 node = rclpy.create_node("talker")
-publisher = node.create_publisher(Int32, args.topic, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+durability = DurabilityPolicy.TRANSIENT_LOCAL if args.latched else DurabilityPolicy.VOLATILE
+publisher = node.create_publisher(Int32, args.topic, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                                                durability=durability))
 try:
     while publisher.get_subscription_count() < args.wait_subscribers:
         rclpy.spin_once(node, timeout_sec=0.05)
