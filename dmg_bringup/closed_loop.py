@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from dmg_executor.controller import Command, Observation, PlanExecutor, Result, tilt_sigma
+from dmg_executor.controller import Command, Observation, PlanExecutor, Result
 from dmg_executor.views import CameraModel
 from dmg_perception.estimator import ObjectPoseEstimator
 from dmg_planner.transforms import invert
@@ -40,7 +40,7 @@ class ClosedLoop:
         estimator.set_camera(cell.config.camera.intrinsic_matrix())
         self.seen: np.ndarray | None = None
         self.seen_time = -math.inf
-        self.seen_tilt_sigma = 0.0
+        self.seen_covariance: np.ndarray | None = None
         self.next_frame = -math.inf
 
     def watch(self, seconds: float) -> None:
@@ -63,13 +63,13 @@ class ClosedLoop:
         estimate = self.estimator.estimate(self.estimator.detect(grey), holder_from_camera, cell.object.name,
                                            self.seen)
         if estimate is not None:
-            self.seen, self.seen_time, self.seen_tilt_sigma = estimate.pose, cell.time, tilt_sigma(estimate.covariance)
+            self.seen, self.seen_time, self.seen_covariance = estimate.pose, cell.time, estimate.covariance
 
     def observe(self) -> Observation:
         cell = self.cell
         pusher = cell.grasp_pose("arm2")
         return Observation(cell.time, cell.grasp_pose("arm1"), pusher, self.seen, self.seen_time, cell.opening("arm1"),
-                           self.seen_tilt_sigma)
+                           self.seen_covariance)
 
     def camera_model(self) -> CameraModel:
         """The wrist camera as the executor needs it: intrinsics, size, place on the pusher."""

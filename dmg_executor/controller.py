@@ -91,7 +91,17 @@ class Observation:
     object_in_holder: np.ndarray | None      # 4x4 latest perceived object pose in the holder's frame
     object_time: float                       # s, when that pose was seen (-inf: never)
     opening: float                           # m between the holder's fingertips
-    object_tilt_sigma: float = 0.0           # rad, that pose's standard deviation of turn off the grasp axis
+    object_covariance: np.ndarray | None = None   # 6x6 of that pose (holder frame; None: taken as certain)
+
+    @property
+    def object_tilt_sigma(self) -> float:
+        """rad, the object pose's standard deviation of turn off the grasp axis."""
+        return 0.0 if self.object_covariance is None else tilt_sigma(self.object_covariance)
+
+    @property
+    def object_position_sigma(self) -> float:
+        """m, the object pose's standard deviation of position along its least certain direction."""
+        return 0.0 if self.object_covariance is None else position_sigma(self.object_covariance)
 
 
 @dataclass
@@ -177,14 +187,23 @@ class _Look:
     homeward: bool = False        # all views tried: on the way back to where the run started
 
 
-def tilt_sigma(covariance: np.ndarray) -> float:
-    """rad: how uncertain a pose (holder frame) is in its turn off the grasp axis x - the larger
-    standard deviation of rotation about y and z, from its 6x6 covariance over (x, y, z, rotation
-    about x, y, z); inf if the covariance is not finite."""
-    block = np.asarray(covariance, float).reshape(6, 6)[4:6, 4:6]
+def _largest_sigma(covariance: np.ndarray, axes: slice) -> float:
+    """The larger standard deviation of a pose over some of its 6x6 covariance's axes (x, y, z,
+    rotation about x, y, z), correlations included; inf if that block is not finite."""
+    block = np.asarray(covariance, float).reshape(6, 6)[axes, axes]
     if not np.all(np.isfinite(block)):
         return math.inf
     return float(np.sqrt(max(float(np.linalg.eigvalsh(block)[-1]), 0.0)))
+
+
+def tilt_sigma(covariance: np.ndarray) -> float:
+    """rad: how uncertain a pose (holder frame) is in its turn off the grasp axis x (rotation about y, z)."""
+    return _largest_sigma(covariance, slice(4, 6))
+
+
+def position_sigma(covariance: np.ndarray) -> float:
+    """m: how uncertain a pose is in its position, along its least certain direction."""
+    return _largest_sigma(covariance, slice(0, 3))
 
 
 def _rotation_about_axis(rotation: np.ndarray) -> float:
@@ -243,6 +262,7 @@ class PlanExecutor:
         self.retreat: np.ndarray | None = None
         self.waypoint = 0
         self.held_reference: np.ndarray | None = None   # object pose the grip must keep, or None while pushing
+        self.held_sigma = 0.0                 # m, position uncertainty of that pose
         self.pushed_reference: np.ndarray | None = None
         self.grip_until = -math.inf
         self.phase = ""
@@ -337,8 +357,8 @@ class PlanExecutor:
         elif self.reckoned is not None and fresh and obs.object_time >= self.reckoned_time:
             self._judge_blind_push(obs)
             self.reckoned = None      # seen again after the push
-        if fresh and self.reference_pending and self.reckoned is None:
-            self.held_reference, self.reference_pending = obs.object_in_holder.copy(), False
+        if fresh and self.reckoned is None and (self.reference_pending or self._reference_uncertain(obs)):
+            self._hold(obs)     # the first fresh pose since the grip closed, or a more certain one
         fault = self._limits(obs) or self._slip(obs)
         if fault:
             return self._abort(*fault)
@@ -360,7 +380,22 @@ class PlanExecutor:
         self.step, self.step_started = step, obs.time
         # (an object pushed unseen is where dead reckoning puts it, not seen there: no reference yet)
         self.reference_pending = obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None
-        self.held_reference = None if self.reference_pending else obs.object_in_holder.copy()
+        if self.reference_pending:
+            self.held_reference = None
+        else:
+            self._hold(obs)
+
+    def _hold(self, obs: Observation) -> None:
+        """Take this pose as the one the closed grip must keep."""
+        self.held_reference, self.held_sigma = obs.object_in_holder.copy(), obs.object_position_sigma
+        self.reference_pending = False
+
+    def _reference_uncertain(self, obs: Observation) -> bool:
+        """Whether the held reference is too uncertain to tell a slip and this pose would do better
+        (a pose a few mm off would make a good grip look like a slip)."""
+        limit = self.settings.slip_position_sigma
+        return (self.held_reference is not None and self.held_sigma > limit
+                and obs.object_position_sigma <= limit)
 
     def _find_contact(self, obs: Observation) -> Command:
         if self.holder_turn is not None:
@@ -875,7 +910,7 @@ class PlanExecutor:
         if not self.returning:
             self.returning = True
             self.step, self.step_started = Step.LEAVE, obs.time
-            self.held_reference = obs.object_in_holder.copy()
+            self._hold(obs)
             try:
                 self._head_home(obs)
             except RouteError as error:
@@ -1045,14 +1080,18 @@ class PlanExecutor:
         return fault if self.slip_poses >= self.settings.slip_poses else None
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
-        """What the latest pose shows: the object moved in the closed grip, or tilted while pushed (by a
-        pose certain enough of its tilt to tell)."""
+        """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
+        its position), or tilted while pushed (by a pose certain enough of its tilt)."""
         s = self.settings
         if self.held_reference is not None:
+            if max(obs.object_position_sigma, self.held_sigma) > s.slip_position_sigma:
+                return None     # no evidence either way
             moved, turned = distance(self.held_reference, obs.object_in_holder)
             if moved > s.slip_distance or turned > s.slip_angle:
                 return Outcome.SLIP, (f"the object moved {moved * 1000:.1f} mm and {np.rad2deg(turned):.1f} deg in the "
-                                      f"closed grip during {self.step.name} of primitive {self.index}")
+                                      f"closed grip during {self.step.name} of primitive {self.index} (that pose's "
+                                      f"uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
+                                      f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
         elif self.pushed_reference is not None:
             change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
             tilt = float(np.linalg.norm(change[1:]))

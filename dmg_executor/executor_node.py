@@ -36,7 +36,7 @@ from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_
 from dmg_bringup.node_main import run_node
 from dmg_bringup.parameters import declare_from_config
 from dmg_bringup.waiting import wait_until
-from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result, tilt_sigma
+from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, TagLayout
@@ -109,7 +109,7 @@ class ExecutorNode(Node):
         self.settings = ExecutorSettings.from_values(values)
         self.poses: dict[str, tuple[float, np.ndarray]] = {}    # holder, pusher, camera, object: (stamp, 4x4)
         self.opening: tuple[float, float] | None = None          # (stamp, m)
-        self.object_tilt_sigma = 0.0                              # rad, of the latest object pose
+        self.object_covariance: np.ndarray | None = None          # 6x6 of the latest object pose
         self.camera_info: CameraInfo | None = None
         self.objects: dict[str, tuple[ObjectSurface, TagLayout]] = {}
         self.run: Run | None = None
@@ -154,7 +154,7 @@ class ExecutorNode(Node):
 
     def on_object_pose(self, msg: PoseWithCovarianceStamped) -> None:
         if self.on_pose("object", msg.header, msg.pose.pose):
-            self.object_tilt_sigma = tilt_sigma(np.asarray(msg.pose.covariance))
+            self.object_covariance = np.asarray(msg.pose.covariance, float).reshape(6, 6)
 
     def on_gripper(self, msg: GripperState) -> None:
         if math.isfinite(msg.opening):
@@ -280,7 +280,7 @@ class ExecutorNode(Node):
             return None
         seen_time, seen = poses.get("object", (-math.inf, None))
         return Observation(self.now(), poses["holder"][1], poses["pusher"][1], seen, seen_time, opening[1],
-                           self.object_tilt_sigma)
+                           self.object_covariance)
 
     def seen_fresh(self) -> bool:
         observation = self.observation()

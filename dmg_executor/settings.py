@@ -56,6 +56,7 @@ class ExecutorSettings:
     slip_angle: float              # rad
     slip_poses: int
     slip_tilt_sigma: float         # rad
+    slip_position_sigma: float
     step_timeout: float
     stall_time: float
     blind_pushes: bool

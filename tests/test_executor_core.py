@@ -126,6 +126,17 @@ def test_tilt_sigma_reads_the_turn_off_the_grasp_axis_from_a_pose_covariance():
     assert tilt_sigma(covariance.ravel()) == np.inf
 
 
+def test_position_sigma_reads_the_least_certain_direction_from_a_pose_covariance():
+    from dmg_executor.controller import position_sigma
+
+    covariance = np.diag([0.001**2, 0.004**2, 0.002**2, 0.5**2, 0.5**2, 0.5**2])   # rotations do not count
+    assert position_sigma(covariance) == pytest.approx(0.004)
+    covariance[0:2, 0:2] = [[0.003**2, 0.003**2 * 0.5], [0.003**2 * 0.5, 0.003**2]]   # correlated: the larger axis
+    assert position_sigma(covariance) == pytest.approx(0.003 * np.sqrt(1.5))
+    covariance[0, 0] = np.inf
+    assert position_sigma(covariance) == np.inf
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
@@ -645,6 +656,41 @@ def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loo
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
+def test_a_held_object_seen_moved_is_a_slip_only_by_poses_certain_of_their_position(loop_parts, box_surface):
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+
+    def tick(shift: float = 0.0, sigma: float | None = None) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        if sigma is not None:     # freshly seen `shift` off along the fingers, this uncertain in position
+            moved = observation.object_in_holder.copy()
+            moved[:3, 3] += [0.0, shift, 0.0]
+            covariance = np.diag([sigma, sigma, sigma, 0.01, 0.01, 0.01]) ** 2
+            observation = replace(observation, object_in_holder=moved, object_time=observation.time,
+                                  object_covariance=covariance)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+
+    # The grip closes on a pose 7 mm off but 3 mm uncertain: the poses seen well after it replace it.
+    while executor.step.name != "APPROACH" and not executor.done:
+        tick(0.007, 0.003)
+    for _ in range(5 * executor.settings.slip_poses):
+        tick()
+    assert not executor.done, executor.result
+    for _ in range(3 * executor.settings.slip_poses):      # 14 mm off, 3 mm uncertain: no evidence
+        tick(0.014, 0.003)
+    assert not executor.done, executor.result
+    for _ in range(executor.settings.slip_poses):
+        tick(0.014, 0.0002)
+    assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
+    assert "moved 14." in executor.result.message and "uncertainty 0.2 mm" in executor.result.message
+
+
 def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_tilt(loop_parts, box_surface):
     from dataclasses import replace
 
@@ -662,8 +708,9 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
         if sigma_deg is not None:     # freshly seen 9 deg tilted, this uncertain in its tilt
             pose = observation.object_in_holder.copy()
             pose[:3, :3] = tilted @ pose[:3, :3]
+            covariance = np.diag([1e-3, 1e-3, 1e-3, 0.01, np.deg2rad(sigma_deg), 0.0]) ** 2
             observation = replace(observation, object_in_holder=pose, object_time=observation.time,
-                                  object_tilt_sigma=np.deg2rad(sigma_deg))
+                                  object_covariance=covariance)
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
 
