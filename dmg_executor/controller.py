@@ -378,6 +378,8 @@ class PlanExecutor:
         """Start a step with the grip closed: from here the object must not move in it (from the
         next fresh pose on, if the last one is stale: the object moved while unseen)."""
         self.step, self.step_started = step, obs.time
+        if self.held_reference is not None and self.reckoned is None:
+            return      # held since its pose was seen, the grip closed all along: still where it was seen
         # (an object pushed unseen is where dead reckoning puts it, not seen there: no reference yet)
         self.reference_pending = obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None
         if self.reference_pending:

@@ -391,6 +391,29 @@ def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_a
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
 
 
+def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_parts, box_surface):
+    """The camera loses the object as the pusher leaves; the grip stayed closed since its last pose,
+    so the next step goes on from that pose instead of looking for the object again."""
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, stale_after=0.3)    # less than the leave takes
+    tick = _half_a_second_into_the_push(loop, executor)
+    while executor.step.name != "LEAVE" and not executor.done:
+        tick()
+    while executor.step.name == "LEAVE" and not executor.done:
+        tick(perceive=False)                     # the camera sees nothing (a lens cap) while the pusher leaves
+    for _ in range(5):
+        tick(perceive=False)
+    observation = loop.observe()
+    assert observation.time - observation.object_time > executor.settings.stale_after     # its pose is stale
+    assert not executor.done, executor.result
+    assert executor.looking is None and (executor.step.name == "APPROACH" or executor.returning), executor.step
+    assert executor.held_reference is not None
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+
+
 def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_checked_after(loop_parts, box_surface):
     from dmg_executor.controller import Outcome
     from dmg_planner.transforms import distance, invert
