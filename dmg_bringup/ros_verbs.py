@@ -112,7 +112,12 @@ def topic_echo(args: argparse.Namespace) -> int:
             msg_cls = resolve_type(type_name)
         except InterfaceError as exc:
             return error("topic echo", str(exc))
-        spin_for(node, 0.2)  # let publishers' QoS be discovered
+        deadline = time.monotonic() + args.timeout if args.timeout else math.inf
+        # The QoS to subscribe with comes from the publishers (a latched topic's history needs a
+        # transient-local subscription): wait for one when only the type was given.
+        while not node.get_publishers_info_by_topic(args.topic) and time.monotonic() < deadline and rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.05)
+        spin_for(node, 0.2)  # let the other publishers' QoS be discovered
         received = 0
 
         def on_message(msg) -> None:
@@ -121,7 +126,6 @@ def topic_echo(args: argparse.Namespace) -> int:
             _print_message(msg, args)
 
         node.create_subscription(msg_cls, args.topic, on_message, subscriber_qos(node, args.topic))
-        deadline = time.monotonic() + args.timeout if args.timeout else math.inf
         limit = 1 if args.once else (args.count or math.inf)
         while rclpy.ok() and received < limit and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.1)

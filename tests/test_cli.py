@@ -4,12 +4,13 @@ from __future__ import annotations
 import json
 import re
 import subprocess
+import time
 
 import pytest
 import yaml
 from ament_index_python.packages import get_package_prefix
 
-from conftest import dmg, helper_command
+from conftest import DMG, dmg, helper_command
 from dmg_bringup.layout import declared_executables
 
 pytestmark = pytest.mark.ros
@@ -61,6 +62,18 @@ def test_topic_echo_once_sees_another_process(processes):
 
     listing = dmg("topic", "list", "-t", "--spin-time", "3")
     assert "/counter [std_msgs/msg/Int32]" in listing.stdout.splitlines()
+
+
+def test_topic_echo_started_before_a_latched_publisher_gets_its_history(processes):
+    echo = subprocess.Popen([DMG, "topic", "echo", "/latched", "std_msgs/msg/Int32", "--json", "-n", "3",
+                             "--timeout", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)          # echo is up and waiting before anything publishes
+    # Publishes 0, 1, 2 at once, then stays up 4 s: only a transient-local subscription gets them all.
+    processes.start(helper_command("talker.py", "--topic", "/latched", "--latched", "--count", "3",
+                                   "--gaps", "0.001", "0.001", "4.0", "--start-delay", "0"))
+    out, err = echo.communicate(timeout=40)
+    assert echo.returncode == 0, err
+    assert [json.loads(line)["data"] for line in out.splitlines()] == [0, 1, 2]
 
 
 def test_topic_hz_measures_the_publish_rate(processes):
