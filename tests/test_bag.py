@@ -118,7 +118,8 @@ def test_record_takes_the_publishers_qos_even_when_a_subscriber_named_the_topic_
     """A latched topic is recorded latched with its history, though only a subscriber named it at first."""
     from rosbags.rosbag2.metadata import QosDurability, QosReliability
     bag = tmp_path / "latched"
-    processes.start([DMG, "topic", "echo", "/latched", "std_msgs/msg/Int32", "--timeout", "60"])
+    listener = processes.start(helper_command("listener.py", "--topic", "/latched", "--out", str(tmp_path / "got")))
+    assert listener.stdout.readline().strip() == "listening"      # a subscriber names the topic first
     recorder = processes.start([DMG, "bag", "record", "-o", str(bag), "/latched"])
     time.sleep(2.0)  # several discovery passes of the recorder with a subscriber and no publisher
     # Publishes 0..4 at once, then stays up 3 s: the recorder must subscribe late and get them as history.
