@@ -216,6 +216,16 @@ def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
 
 
+def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_reach: float) -> float:
+    """Which way [rad, signed] the pusher should slide along the grasp axis x (holder frame) to turn a
+    pushed object's tilt `tilt` (rotation vector) back. Sliding drags the face along x by friction
+    F_x at the contact `lever` from the grasp axis; the self-centring grip answers with unequal
+    finger forces whose sliding friction adds (mu*h - L)*F_x about d x x in all, mu*h = `grip_reach`.
+    While the object slides, nothing else resists a turn about that axis."""
+    axis = np.cross(direction, [1.0, 0.0, 0.0])
+    return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
+
+
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
     """Up to OTHER_VIEWS of `orientations` (best first), each DISTINCT_VIEW from `chosen` and the others taken."""
     taken = [chosen]
@@ -364,6 +374,8 @@ class PlanExecutor:
             return self._abort(*fault)
         if self.reckoned is not None:
             obs = replace(obs, object_in_holder=self.reckoned)    # pushed, not seen since: where it went
+        elif self._held_better_than(obs):
+            obs = replace(obs, object_in_holder=self.held_reference)   # held still since a certain pose
         if obs.time - self.step_started > s.step_timeout:
             return self._abort(Outcome.STEP_TIMEOUT, f"{self.step.name} of primitive {self.index} did not finish in "
                                f"{s.step_timeout:.1f} s (contact error {self.errors[0] * 1000:.1f} mm, angle error "
@@ -398,6 +410,13 @@ class PlanExecutor:
         limit = self.settings.slip_position_sigma
         return (self.held_reference is not None and self.held_sigma > limit
                 and obs.object_position_sigma <= limit)
+
+    def _held_better_than(self, obs: Observation) -> bool:
+        """Is the held reference (a pose certain of its position, the grip closed since) a better account
+        of where the object is than this pose, too uncertain to show that it moved?"""
+        limit = self.settings.slip_position_sigma
+        return (self.held_reference is not None and self.held_sigma <= limit
+                and obs.object_position_sigma > limit)
 
     def _find_contact(self, obs: Observation) -> Command:
         if self.holder_turn is not None:
@@ -847,7 +866,8 @@ class PlanExecutor:
             # Keep the push line through the grasp axis: an offset across it would turn the object.
             across = np.cross(self.push.direction, holder[:3, 0])
             offset = float((obs.pusher[:3, 3] - holder[:3, 3]) @ across)
-            relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across, np.zeros(3)])
+            relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across
+                                       + self._tilt_slide(obs) * holder[:3, 0], np.zeros(3)])
         else:
             turn = self.errors[1]
             turned = _turned_since(self.pushed_reference, obs.object_in_holder)
@@ -862,6 +882,20 @@ class PlanExecutor:
         command = self._coordinated(obs, relative)
         command.holder_grip = self._loosened(obs)
         return command
+
+    def _tilt_slide(self, obs: Observation) -> float:
+        """Pusher speed [m/s] along the grasp axis that steers a translated object's tilt back
+        (`tilt_steering`), from fresh poses certain of their tilt only."""
+        s = self.settings
+        if (s.tilt_gain == 0.0 or self.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
+                or obs.time - obs.object_time > s.stale_after):
+            return 0.0
+        tilt = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
+        pusher = invert(obs.holder) @ obs.pusher
+        local = self.push.local_direction
+        lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
+        steer = tilt_steering(tilt, local, lever, s.grip_friction * obs.opening / 2)
+        return float(np.clip(s.tilt_gain * steer, -s.tilt_speed, s.tilt_speed))
 
     def _tighten(self, obs: Observation) -> Command:
         self.phase = "tighten"

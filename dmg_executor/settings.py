@@ -19,6 +19,8 @@ class ExecutorSettings:
     angular_gain: float
     finger_gain: float
     approach_gain: float
+    tilt_gain: float               # m/s per rad
+    tilt_speed: float
     tilt_limit: float              # rad
     roll_limit: float              # rad
     approach_speed: float

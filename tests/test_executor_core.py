@@ -137,6 +137,26 @@ def test_position_sigma_reads_the_least_certain_direction_from_a_pose_covariance
     assert position_sigma(covariance) == np.inf
 
 
+def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lever_decides():
+    from dmg_executor.controller import tilt_steering
+
+    down_y = np.array([0.0, -1.0, 0.0])           # pushed along -y: the tilt that matters is about y x ... = z
+    tilted = np.array([0.0, 0.0, np.deg2rad(2.0)])
+    # The grip's friction reach (mu*h 20 mm) beyond the contact's lever (12 mm): sliding along -x turns it back.
+    assert tilt_steering(tilted, down_y, 0.012, 0.020) == pytest.approx(-np.deg2rad(2.0))
+    # The lever the longer (40 mm): the pusher's own friction decides, the other way.
+    assert tilt_steering(tilted, down_y, 0.040, 0.020) == pytest.approx(np.deg2rad(2.0))
+    # Pushed the other way, the same tilt needs the opposite slide.
+    assert tilt_steering(tilted, -down_y, 0.012, 0.020) == pytest.approx(np.deg2rad(2.0))
+    # Turning about the grasp axis (the pushes' business) or about the push itself: no slide.
+    for rotation in ([np.deg2rad(5.0), 0.0, 0.0], [0.0, np.deg2rad(5.0), 0.0]):
+        assert tilt_steering(np.array(rotation), down_y, 0.012, 0.020) == pytest.approx(0.0)
+    # Pushed along the fingers (z), the tilt about y is the one steered.
+    along_fingers = np.array([0.0, 0.0, 1.0])
+    assert tilt_steering(np.array([0.0, np.deg2rad(2.0), 0.0]), along_fingers, 0.012, 0.020) == \
+        pytest.approx(-np.deg2rad(2.0))
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
@@ -746,3 +766,85 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
         tick(0.5)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
     assert "tilted 9.0 deg" in executor.result.message and "uncertainty 0.5 deg" in executor.result.message
+
+
+def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_are_uncertain(loop_parts, box_surface):
+    """Seen from where the pusher ends, a lone tag gives poses a few mm and degrees off: the run is
+    judged by the certain pose the grip has held since, not by them."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+
+    def tick(uncertain: bool = False) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        if uncertain:     # freshly seen 5 mm off along the push, 3 mm uncertain
+            moved = observation.object_in_holder.copy()
+            moved[:3, 3] += 0.005 * moved[:3, 2]
+            covariance = np.diag([0.003, 0.003, 0.003, 0.05, 0.05, 0.05]) ** 2
+            observation = replace(observation, object_in_holder=moved, object_time=observation.time,
+                                  object_covariance=covariance)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+
+    while not executor.returning and not executor.done:
+        tick()
+    assert executor.held_reference is not None and executor.held_sigma <= executor.settings.slip_position_sigma
+    ends = cell.time + 120.0
+    while not executor.done and cell.time < ends:
+        tick(uncertain=True)
+    outcome = executor.result
+    assert outcome.outcome == Outcome.OK, outcome.message
+    truth, _ = executor.final_errors(replace(loop.observe(), object_in_holder=cell.object_in_gripper("arm1")))
+    assert abs(outcome.position_error - truth) < 0.001, (outcome.position_error, truth)
+
+
+def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by_the_pusher(loop_parts):
+    """A grasp of the plug (one of dmg eval's): pushed 10 mm along the fingers without steering, the
+    sliding plug turns off its grasp axis (nothing resists while it slides); with the pusher sliding
+    along the grasp axis against the tilt it sees, it stays near the axis."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_executor.views import TagLayout
+    from dmg_perception.estimator import ObjectPoseEstimator
+    from dmg_planner.graph import GraphParameters, build_graph
+    from dmg_planner.objects import load_object
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import invert
+
+    cell = loop_parts[0]
+    model = load_object("plug")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+    loop, surface, tags = ClosedLoop(cell, ObjectPoseEstimator([model])), ObjectSurface.of(model), TagLayout.of(model)
+    start = np.eye(4)
+    start[:3, :3], start[:3, 3] = Rotation.from_rotvec([np.pi / 2, 0.0, 0.0]).as_matrix(), [0.01, 0.025, 0.005]
+    goal = start.copy()
+    goal[2, 3] += 0.01
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+
+    def largest_tilt(tilt_gain: float) -> float:
+        cell.reset("plug", object_in_gripper=invert(start))
+        loop.watch(0.5)
+        planned = plan(graph, pose(invert(loop.seen)), pose(goal))
+        assert [p.kind.name for p in planned.primitives][:1] == ["TRANSLATION"], planned.message
+        executor = PlanExecutor(ExecutorSettings.defaults(tilt_gain=tilt_gain), surface, planned.primitives[:1],
+                                planned.principal_finger, 1.0, cell.time, loop.camera_model(), tags)
+        first, largest, ends = cell.object_in_gripper("arm1"), 0.0, cell.time + 120.0
+        while not executor.done and cell.time < ends:
+            loop.perceive()
+            loop.apply(executor.update(loop.observe()))
+            cell.run(loop.control_period)
+            turned = Rotation.from_matrix(cell.object_in_gripper("arm1")[:3, :3] @ first[:3, :3].T).as_rotvec()
+            largest = max(largest, float(np.rad2deg(np.linalg.norm(turned[1:]))))
+        return largest
+
+    unsteered, steered = largest_tilt(0.0), largest_tilt(ExecutorSettings.defaults().tilt_gain)
+    assert unsteered > 4.0 and steered < 2.0, (unsteered, steered)
