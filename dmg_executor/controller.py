@@ -237,6 +237,12 @@ def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
     return taken[1:]
 
 
+def _limited(velocity: np.ndarray, limit: float, full: bool = False) -> np.ndarray:
+    """`velocity` capped at `limit` in size, or (`full`) at exactly `limit` its way."""
+    size = float(np.linalg.norm(velocity))
+    return velocity * (limit / size) if size > limit or (full and size > 0.0) else velocity
+
+
 def _shift(twist: np.ndarray, from_point: np.ndarray, to_point: np.ndarray) -> np.ndarray:
     """The same rigid motion as a twist at another point."""
     return np.concatenate([twist[:3] + np.cross(twist[3:], to_point - from_point), twist[3:]])
@@ -344,9 +350,10 @@ class PlanExecutor:
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
                                f"during {self.step.name} of primitive {self.index}: stopped with the object held")
-        # Poses from images taken while the holder turns or has the object turned away are not trusted
-        # (the object seen edge-on or from its back: measured 7-10 mm off); the held pose is known.
-        trusted = self.holder_turn is None and not self.far_side
+        # Poses from images taken while the holder turns are not trusted, nor those with the object
+        # turned away unless they are certain (the object seen edge-on or from its back: measured
+        # 7-10 mm off); the held pose is known.
+        trusted = self.holder_turn is None and (not self.far_side or self._certain(obs))
         fresh = trusted and obs.time - obs.object_time <= s.stale_after
         pushing = self.step == Step.EXECUTE and self.phase in ("touch", "push")
         if pushing and s.blind_pushes:
@@ -369,7 +376,7 @@ class PlanExecutor:
             self.reckoned = None      # seen again after the push
         if fresh and self.reckoned is None and (self.reference_pending or self._reference_uncertain(obs)):
             self._hold(obs)     # the first fresh pose since the grip closed, or a more certain one
-        fault = self._limits(obs) or self._slip(obs)
+        fault = self._limits(obs) or (self._slip(obs) if trusted else None)
         if fault:
             return self._abort(*fault)
         if self.reckoned is not None:
@@ -403,6 +410,11 @@ class PlanExecutor:
         """Take this pose as the one the closed grip must keep."""
         self.held_reference, self.held_sigma = obs.object_in_holder.copy(), obs.object_position_sigma
         self.reference_pending = False
+
+    def _certain(self, obs: Observation) -> bool:
+        """Is this pose certain enough of both its position and its tilt to show a slip?"""
+        s = self.settings
+        return obs.object_position_sigma <= s.slip_position_sigma and obs.object_tilt_sigma <= s.slip_tilt_sigma
 
     def _reference_uncertain(self, obs: Observation) -> bool:
         """Whether the held reference is too uncertain to tell a slip and this pose would do better
@@ -505,7 +517,7 @@ class PlanExecutor:
         if turn.clearing:
             stalled = self._stalled(obs)
             if not (self._arrived(obs) or stalled):
-                return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+                return self._along_route(obs)
             if not stalled and self.waypoint < len(self.push.waypoints) - 1:
                 self.waypoint += 1
                 return Command()
@@ -736,7 +748,7 @@ class PlanExecutor:
         return self.settings.tip_radius * (1.0 + across)
 
     def _approach(self, obs: Observation) -> Command:
-        command = self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+        command = self._along_route(obs)
         if not self._arrived(obs) and self._stalled(obs):
             return self._give_up_push(obs)
         if self._arrived(obs):
@@ -794,7 +806,7 @@ class PlanExecutor:
         if look.homeward:
             if self._arrived(obs) and self.waypoint < len(self.push.waypoints) - 1:
                 self.waypoint += 1
-            return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+            return self._along_route(obs)
         command = self._go_to(obs, look.place, look.views[0])
         if Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude() < WAYPOINT_TURN_TOLERANCE:
             if look.since is None:
@@ -840,13 +852,15 @@ class PlanExecutor:
                                        float(pusher[:3, 3] @ self.push.local_direction) + s.gap
                                        + self._shortfall(self.push.local_direction))
             self.reckoning.moved(obs.time, pusher)
-            if primitive.kind == PrimitiveKind.ROTATION:
-                # Close the gap along the push line first: turning from `gap` away, the pusher would
-                # mostly slide past the face (its arc is tangent to the face, not into it).
-                self.phase = "touch"
+            # Close the gap along the push line first, at push speed: turning from `gap` away, a rotation's
+            # pusher would mostly slide past the face (its arc is tangent to the face, not into it); a
+            # translation's P control would take seconds over it. A translation stops `touch_margin`
+            # short of where the face is believed to be: the P-controlled push meets it.
+            self.phase = "touch"
         if self.phase == "touch":
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from) @ self.push.local_direction)
-            if closed < s.gap:
+            short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION else 0.0
+            if closed < s.gap - short:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._loosened(obs)
                 return command
@@ -923,7 +937,7 @@ class PlanExecutor:
             self.retreat = None
             self._enter(Step.FIND_CONTACT, obs)
             return Command()
-        return self._go_to(obs, self.retreat)
+        return self._go_to(obs, self.retreat, through=True)
 
     def _keep_out(self, obs: Observation) -> KeepOut:
         s = self.settings
@@ -966,7 +980,7 @@ class PlanExecutor:
                 self._finish(Outcome.OK if within else Outcome.OUT_OF_TOLERANCE,
                              "; ".join([summary] + self.notes), position, angle)
                 return self._halt()
-        return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint])
+        return self._along_route(obs)
 
     # --- motion helpers
     def _stalled(self, obs: Observation) -> bool:
@@ -990,19 +1004,25 @@ class PlanExecutor:
         tolerance = self.settings.position_tolerance if last else self.settings.waypoint_tolerance
         return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE
 
-    def _go_to(self, obs: Observation, target: np.ndarray, orientation: np.ndarray | None = None) -> Command:
-        """P control of the pusher towards a position (and orientation), speeds limited."""
+    def _along_route(self, obs: Observation) -> Command:
+        """Towards the current waypoint of the pusher's route: through the ones on the way, onto the last."""
+        through = self.waypoint < len(self.push.waypoints) - 1
+        return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint], through)
+
+    def _go_to(self, obs: Observation, target: np.ndarray, orientation: np.ndarray | None = None,
+               through: bool = False) -> Command:
+        """P control of the pusher towards a position (and orientation), speeds limited. Going `through`
+        (a waypoint on the way), at full speed until within its tolerance: P control's slow tail at
+        each waypoint took about a second."""
         s = self.settings
-        velocity = s.approach_gain * (target - obs.pusher[:3, 3])
-        speed = np.linalg.norm(velocity)
-        if speed > s.approach_speed:
-            velocity *= s.approach_speed / speed
+        offset = target - obs.pusher[:3, 3]
+        velocity = _limited(s.approach_gain * offset, s.approach_speed,
+                            through and np.linalg.norm(offset) > s.waypoint_tolerance)
         angular = np.zeros(3)
         if orientation is not None:
-            angular = s.approach_gain * Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
-            rate = np.linalg.norm(angular)
-            if rate > s.max_angular_speed:
-                angular *= s.max_angular_speed / rate
+            turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
+            angular = _limited(s.approach_gain * turn, s.max_angular_speed,
+                               through and np.linalg.norm(turn) > WAYPOINT_TURN_TOLERANCE)
         return Command(pusher=np.concatenate([velocity, angular]))
 
     def _loosened(self, obs: Observation) -> GripCommand:
@@ -1117,7 +1137,8 @@ class PlanExecutor:
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
-        its position), or tilted while pushed (by a pose certain enough of its tilt)."""
+        its position), or tilted while pushed (by a pose certain enough of its tilt; once the grip has
+        closed again, only the first kind counts: a pose a few mm off may still be sure of its tilt)."""
         s = self.settings
         if self.held_reference is not None:
             if max(obs.object_position_sigma, self.held_sigma) > s.slip_position_sigma:
@@ -1128,7 +1149,7 @@ class PlanExecutor:
                                       f"closed grip during {self.step.name} of primitive {self.index} (that pose's "
                                       f"uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
                                       f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
-        elif self.pushed_reference is not None:
+        elif self.pushed_reference is not None and self.step == Step.EXECUTE and self.phase in ("touch", "push"):
             change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
             tilt = float(np.linalg.norm(change[1:]))
             if tilt > s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:

@@ -40,6 +40,7 @@ class ExecutorSettings:
     hand_end: float
     hand_radius: float
     max_push_angle: float          # rad
+    touch_margin: float
     hold_force: float
     slide_force: float
     grip_friction: float

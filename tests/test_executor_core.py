@@ -768,6 +768,45 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
     assert "tilted 9.0 deg" in executor.result.message and "uncertainty 0.5 deg" in executor.result.message
 
 
+def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pose(loop_parts, box_surface):
+    """Once the grip has closed after a push, only a pose certain of its position can show a slip:
+    poses that cannot be held (here stale ones after a push the camera lost) may be sure of a tilt
+    they got wrong (sim: a pose 7 mm off with 0.4 deg of tilt uncertainty raised a false SLIP)."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    tilted = Rotation.from_rotvec([0.0, np.deg2rad(9.0), 0.0]).as_matrix()    # about holder y: off the grasp axis
+    s = executor.settings
+    deadline = cell.time + 60.0
+
+    def tick(freeze: float | None = None, tilt: bool = False) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        if freeze is not None:    # the camera lost the object: its last pose from `freeze` on
+            observation = replace(observation, object_time=freeze)
+        if tilt:                  # a stale pose, seen 9 deg tilted and sure of that, unsure of its position
+            pose = observation.object_in_holder.copy()
+            pose[:3, :3] = tilted @ pose[:3, :3]
+            covariance = np.diag([3e-3, 3e-3, 3e-3, 0.01, np.deg2rad(0.5), 0.0]) ** 2
+            observation = replace(observation, object_in_holder=pose, object_time=observation.time - 1.5 * s.stale_after,
+                                  object_covariance=covariance)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
+        tick()
+    frozen = executor.last.object_time
+    while executor.step.name == "EXECUTE" and cell.time < deadline:     # pushed on, on dead reckoning
+        tick(freeze=frozen)
+    assert executor.step.name == "LEAVE" and executor.held_reference is None, (executor.step, executor.result)
+    for _ in range(3 * s.slip_poses):
+        tick(tilt=True)
+    assert not executor.done, executor.result
+
+
 def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_are_uncertain(loop_parts, box_surface):
     """Seen from where the pusher ends, a lone tag gives poses a few mm and degrees off: the run is
     judged by the certain pose the grip has held since, not by them."""
