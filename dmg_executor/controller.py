@@ -49,6 +49,7 @@ EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
+TURN_GAIN = np.deg2rad(0.5)   # the object turning this much with the pusher is progress (pose noise: 0.1-0.3 deg)
 HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to where the pusher goes is headway
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
@@ -289,7 +290,8 @@ class PlanExecutor:
         self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
-        self.pushed_from = np.zeros(3)    # pusher in the holder's frame where the current push began
+        self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
+        self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
@@ -847,7 +849,7 @@ class PlanExecutor:
             self.far_side_pushed = self.far_side
             self.pushed_reference = obs.object_in_holder.copy()
             pusher = invert(obs.holder) @ obs.pusher
-            self.pushed_from, self.pushed_along = pusher[:3, 3].copy(), self.push.local_direction.copy()
+            self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
             self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher,
                                        float(pusher[:3, 3] @ self.push.local_direction) + s.gap
                                        + self._shortfall(self.push.local_direction))
@@ -858,7 +860,7 @@ class PlanExecutor:
             # short of where the face is believed to be: the P-controlled push meets it.
             self.phase = "touch"
         if self.phase == "touch":
-            closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from) @ self.push.local_direction)
+            closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
             short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION else 0.0
             if closed < s.gap - short:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
@@ -889,6 +891,10 @@ class PlanExecutor:
             left = budget - turned
             if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
                 return self._tighten(obs)
+            if self._turn_stalled(obs, turned):
+                self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
+                                  f"the object stopped turning with the pusher")
+                return self._tighten(obs)
             lever = max(self.push.lever, 1e-3)
             rate = float(np.clip(s.angular_gain * abs(left), s.min_push_speed / lever,
                                  min(s.max_angular_speed, s.push_speed / lever)))
@@ -896,6 +902,18 @@ class PlanExecutor:
         command = self._coordinated(obs, relative)
         command.holder_grip = self._loosened(obs)
         return command
+
+    def _turn_stalled(self, obs: Observation, turned: float) -> bool:
+        """Has the pusher turned `turn_stall` on since the object last gained TURN_GAIN with it? Then it
+        no longer turns the object but shoves it out of the grip (sim: bracket and plug stuck at 31 deg
+        - the pusher slid along the face into a corner - then 8-38 deg of tilt within 0.5 s). Counted
+        from the object's first gain: the pusher takes up the contact's slack first."""
+        pusher_turned = abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher))
+        mark = self.turn_mark
+        if abs(turned) >= (TURN_GAIN if mark is None else mark[1] + TURN_GAIN):
+            self.turn_mark = (pusher_turned, abs(turned))
+            return False
+        return mark is not None and pusher_turned - mark[0] > self.settings.turn_stall
 
     def _tilt_slide(self, obs: Observation) -> float:
         """Pusher speed [m/s] along the grasp axis that steers a translated object's tilt back

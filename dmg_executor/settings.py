@@ -41,6 +41,7 @@ class ExecutorSettings:
     hand_radius: float
     max_push_angle: float          # rad
     touch_margin: float
+    turn_stall: float              # rad
     hold_force: float
     slide_force: float
     grip_friction: float

@@ -768,6 +768,50 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
     assert "tilted 9.0 deg" in executor.result.message and "uncertainty 0.5 deg" in executor.result.message
 
 
+def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loop_parts, box_surface):
+    """A pusher turning on while the object does not (slid along the face into a corner) would
+    shove the object out of the grip: the push stops with the grip closed and the rest is planned
+    again. Here the camera shows the object stuck after it has turned 2 deg with the pusher."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import PlanExecutor, _turned_since
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import invert
+
+    cell, loop, graph, tags = loop_parts
+    start = invert(cell.reset("box").object_in_gripper)
+    goal = start.copy()
+    goal[:3, :3] = Rotation.from_rotvec(np.deg2rad(30.0) * start[:3, 0]).as_matrix() @ start[:3, :3]
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    result = plan(graph, pose(start), pose(goal))
+    assert [p.kind.name for p in result.primitives] == ["ROTATION"]
+    executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, result.primitives, result.principal_finger,
+                            1.0, cell.time, loop.camera_model(), tags)
+    deadline, stuck, stuck_at = cell.time + 60.0, None, 0.0
+
+    def pusher_turned() -> float:
+        return abs(_turned_since(executor.pushed_from, invert(cell.grasp_pose("arm1")) @ cell.grasp_pose("arm2")))
+
+    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
+        loop.perceive()
+        observation = loop.observe()
+        if stuck is not None:      # seen, freshly, where it stuck
+            observation = replace(observation, object_in_holder=stuck, object_time=observation.time)
+        elif (executor.step.name == "EXECUTE" and executor.pushed_reference is not None
+              and abs(_turned_since(executor.pushed_reference, observation.object_in_holder)) > np.deg2rad(2.0)):
+            stuck, stuck_at = observation.object_in_holder.copy(), pusher_turned()
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+    assert stuck is not None and executor.step.name == "LEAVE", (executor.step, executor.result)
+    assert any("stopped turning with the pusher" in note for note in executor.notes), executor.notes
+    # Stopped within turn_stall (and the arm's lag) of the pusher turning on from there.
+    turned_on = pusher_turned() - stuck_at
+    assert 0.0 < turned_on < executor.settings.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
+
+
 def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pose(loop_parts, box_surface):
     """Once the grip has closed after a push, only a pose certain of its position can show a slip:
     poses that cannot be held (here stale ones after a push the camera lost) may be sure of a tilt
