@@ -291,8 +291,8 @@ class PlanExecutor:
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
         self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
-        self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
+        self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
         self.reckoned_time = -math.inf
@@ -357,8 +357,7 @@ class PlanExecutor:
         # 7-10 mm off); the held pose is known.
         trusted = self.holder_turn is None and (not self.far_side or self._certain(obs))
         fresh = trusted and obs.time - obs.object_time <= s.stale_after
-        pushing = self.step == Step.EXECUTE and self.phase in ("touch", "push")
-        if pushing and s.blind_pushes:
+        if self._pushing() and s.blind_pushes:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
             # up for, and the push goes on when the camera loses the object.
             known = self.reckoning
@@ -413,8 +412,12 @@ class PlanExecutor:
         self.held_reference, self.held_sigma = obs.object_in_holder.copy(), obs.object_position_sigma
         self.reference_pending = False
 
+    def _pushing(self) -> bool:
+        return self.step == Step.EXECUTE and self.phase in ("touch", "push")
+
     def _certain(self, obs: Observation) -> bool:
-        """Is this pose certain enough of both its position and its tilt to show a slip?"""
+        """Is this pose certain enough of both its position and its tilt to show a slip (and so to be
+        trusted where a view may mislead)?"""
         s = self.settings
         return obs.object_position_sigma <= s.slip_position_sigma and obs.object_tilt_sigma <= s.slip_tilt_sigma
 
@@ -1167,7 +1170,7 @@ class PlanExecutor:
                                       f"closed grip during {self.step.name} of primitive {self.index} (that pose's "
                                       f"uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
                                       f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
-        elif self.pushed_reference is not None and self.step == Step.EXECUTE and self.phase in ("touch", "push"):
+        elif self.pushed_reference is not None and self._pushing():
             change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
             tilt = float(np.linalg.norm(change[1:]))
             if tilt > s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
