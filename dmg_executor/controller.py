@@ -351,7 +351,7 @@ class PlanExecutor:
         if obs.object_in_holder is None or unseen > s.stale_after_held:
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
-                               f"during {self.step.name} of primitive {self.index}: stopped with the object held")
+                               f"during {self.step.name} of primitive {self.index}: stopped, gripper 1 closed at the hold force")
         # Poses from images taken while the holder turns are not trusted, nor those with the object
         # turned away unless they are certain (the object seen edge-on or from its back: measured
         # 7-10 mm off); the held pose is known.
