@@ -56,6 +56,8 @@ FACE_RAYS = 36        # rays round the grasp axis that find the faces a translat
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
 SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for pushes within this of its direction
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
+DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
+TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
 
 
 class Step(IntEnum):
@@ -212,6 +214,12 @@ def _rotation_about_axis(rotation: np.ndarray) -> float:
     return float(Rotation.from_matrix(rotation).as_rotvec()[0])
 
 
+def _slid_since(reference: np.ndarray, now: np.ndarray) -> float:
+    """How far [m] the grasp's middle moved on the object from pose `reference` to `now` (holder frame);
+    a turn about the grasp axis moves it not at all."""
+    return float(np.linalg.norm(invert(now)[:3, 3] - invert(reference)[:3, 3]))
+
+
 def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     """How far [rad] the object turned about the grasp axis from pose `reference` to `now` (holder frame)."""
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
@@ -264,6 +272,8 @@ class PlanExecutor:
             raise ValueError(f"primitives {missing} carry no gripper_after pose: plan with this planner version")
         self.settings, self.surface, self.primitives = settings, surface, list(primitives)
         self.plan_length = len(primitives)
+        # The narrowest the object is between gripper 1's fingers along the plan: closed much further, they hold nothing.
+        self.narrowest_grasp = min((min(p.opening_before, p.opening_after) for p in primitives), default=0.0)
         self.notes: list[str] = []      # primitives that could not be finished, and why
         self.camera, self.tags = camera, tags
         self.turns = turns(settings.tilt_limit, settings.roll_limit) if camera is not None and tags is not None else None
@@ -338,6 +348,10 @@ class PlanExecutor:
     # --- the state machine ---------------------------------------------------------------------
     def _tick(self, obs: Observation) -> Command:
         s = self.settings
+        if obs.opening < DROPPED_SHARE * self.narrowest_grasp:
+            return self._abort(Outcome.OBJECT_LOST, f"the object left gripper 1 during {self.step.name} of primitive "
+                               f"{self.index}: its fingers closed to {obs.opening * 1000:.1f} mm (the plan's narrowest "
+                               f"grasp is {self.narrowest_grasp * 1000:.1f} mm); stopped")
         # While the grip is closed and nothing pushes, the object cannot move: the camera may lose it
         # for a while (the pusher's hand turns and passes the object); the run ends only when the
         # held object stays unseen. A push goes on by dead reckoning (or, without blind pushes, stops
@@ -490,13 +504,17 @@ class PlanExecutor:
             return False
         return True
 
-    def _clear_of_turn(self, obs: Observation, place: np.ndarray) -> bool:
-        """Is the pusher's tip at `place` (base frame) out of reach of the object turning about the holder's fingers?"""
+    def _turn_radius(self, obs: Observation) -> float:
+        """How far from the holder's finger axis the pusher's tip must be while the holder turns the object."""
         s = self.settings
-        local = apply(invert(obs.holder), place)
         body = apply(obs.object_in_holder, self.surface.vertices)
         reach = max(float(np.hypot(body[:, 0], body[:, 1]).max()), obs.opening / 2 + 2.5 * s.tip_radius)
-        return float(np.hypot(local[0], local[1])) > reach + 2 * s.tip_radius + s.clearance
+        return reach + 2 * s.tip_radius + s.clearance
+
+    def _clear_of_turn(self, obs: Observation, place: np.ndarray) -> bool:
+        """Is the pusher's tip at `place` (base frame) out of reach of the object turning about the holder's fingers?"""
+        local = apply(invert(obs.holder), place)
+        return float(np.hypot(local[0], local[1])) > self._turn_radius(obs)
 
     def _start_holder_turn(self, obs: Observation, back: bool) -> Command:
         """The pusher back to where it started, then the holder turns the object: `holder_turn` to show
@@ -508,7 +526,7 @@ class PlanExecutor:
             self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
                               f"{np.rad2deg(angle):.0f} deg about its fingers for a push on its far side")
         try:
-            self._head_home(obs)
+            self._head_home(obs, clear_of_turn=True)
         except RouteError as error:
             return self._abort(Outcome.LIMIT_VIOLATION, f"cannot clear the pusher from the object before the holding "
                                f"gripper turns it: {error}")
@@ -860,12 +878,17 @@ class PlanExecutor:
             # Close the gap along the push line first, at push speed: turning from `gap` away, a rotation's
             # pusher would mostly slide past the face (its arc is tangent to the face, not into it); a
             # translation's P control would take seconds over it. A translation stops `touch_margin`
-            # short of where the face is believed to be: the P-controlled push meets it.
+            # short of where the face is believed to be: the P-controlled push meets it. Either stops
+            # where the camera sees the object move: the face was nearer than believed (a rotation's
+            # pusher went on to shove the box 5 mm across the fingers and, turning, out of them).
             self.phase = "touch"
         if self.phase == "touch":
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
             short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION else 0.0
-            if closed < s.gap - short:
+            seen = self.reckoning.pose
+            met = (_slid_since(self.pushed_reference, seen) > TOUCHED
+                   or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN)
+            if closed < s.gap - short and not met:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._loosened(obs)
                 return command
@@ -897,6 +920,11 @@ class PlanExecutor:
             if self._turn_stalled(obs, turned):
                 self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
                                   f"the object stopped turning with the pusher")
+                return self._tighten(obs)
+            slid = _slid_since(self.pushed_reference, obs.object_in_holder)
+            if slid > s.rotation_slide:
+                self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
+                                  f"the object slid {slid * 1000:.1f} mm in the grip")
                 return self._tighten(obs)
             lever = max(self.push.lever, 1e-3)
             rate = float(np.clip(s.angular_gain * abs(left), s.min_push_speed / lever,
@@ -965,11 +993,18 @@ class PlanExecutor:
         return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.tip_radius, 2 * s.tip_radius,
                         s.clearance)
 
-    def _head_home(self, obs: Observation) -> None:
-        """Route the pusher back to where it started (RouteError if there is none)."""
+    def _head_home(self, obs: Observation, clear_of_turn: bool = False) -> None:
+        """Route the pusher back to where it started (RouteError if there is none); before the holder
+        turns the object, at least out of the turning object's reach (with gripper 1 moving in the
+        pushes, at alpha < 1, the start may have come within it)."""
         box = self._keep_out(obs)
         to_holder = invert(obs.holder)
         local = [apply(to_holder, p) for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+        if clear_of_turn:
+            radius, needed = float(np.hypot(*local[1][:2])), self._turn_radius(obs) + self.settings.clearance
+            if radius < needed:
+                outward = local[1][:2] if radius > 1e-6 else local[0][:2]
+                local[1][:2] = outward / np.linalg.norm(outward) * needed
         local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
         places = [apply(obs.holder, w) for w in route(local[0], local[1], box, local[1])]
         orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [self.pusher_home[:3, :3]]

@@ -42,6 +42,7 @@ class ExecutorSettings:
     max_push_angle: float          # rad
     touch_margin: float
     turn_stall: float              # rad
+    rotation_slide: float
     hold_force: float
     slide_force: float
     grip_friction: float

@@ -361,6 +361,29 @@ def test_an_object_slipping_in_the_closed_grip_aborts_with_slip_and_the_grip_clo
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)   # the executor closed the grip again
 
 
+def test_an_object_knocked_out_of_the_grip_ends_the_run_saying_so(loop_parts, box_surface):
+    """A dropped object is told from one the camera lost: gripper 1's fingers close on nothing."""
+    import mujoco
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    for _ in range(50):                         # the run starts: the pusher sets off
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    knocked = cell.time
+    body = mujoco.mj_name2id(cell.model, mujoco.mjtObj.mjOBJ_BODY, "object")
+    cell.data.xfrc_applied[body, :3] = 60.0 * cell.grasp_pose("arm1")[:3, 1]   # fault: a knock across the fingers
+    cell.run(0.1)
+    cell.data.xfrc_applied[body] = 0.0
+    outcome = loop.run(executor, time_limit=30)
+    assert outcome.outcome == Outcome.OBJECT_LOST and "left gripper 1" in outcome.message, outcome.message
+    assert cell.time - knocked < 2.0        # at once, not after the lost-pose limit (10 s)
+    assert np.linalg.norm(cell.object_in_gripper("arm1")[:3, 3]) > 0.05     # it did fall out
+
+
 def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loop_parts, box_surface):
     from dmg_executor.controller import Outcome
 
@@ -774,22 +797,11 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     again. Here the camera shows the object stuck after it has turned 2 deg with the pusher."""
     from dataclasses import replace
 
-    from scipy.spatial.transform import Rotation
-
-    from dmg_executor.controller import PlanExecutor, _turned_since
-    from dmg_executor.settings import ExecutorSettings
-    from dmg_planner.search import GripperPose, plan
+    from dmg_executor.controller import _turned_since
     from dmg_planner.transforms import invert
 
-    cell, loop, graph, tags = loop_parts
-    start = invert(cell.reset("box").object_in_gripper)
-    goal = start.copy()
-    goal[:3, :3] = Rotation.from_rotvec(np.deg2rad(30.0) * start[:3, 0]).as_matrix() @ start[:3, :3]
-    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
-    result = plan(graph, pose(start), pose(goal))
-    assert [p.kind.name for p in result.primitives] == ["ROTATION"]
-    executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, result.primitives, result.principal_finger,
-                            1.0, cell.time, loop.camera_model(), tags)
+    cell, loop, _, _ = loop_parts
+    executor = _rotation_executor(loop_parts, box_surface)
     deadline, stuck, stuck_at = cell.time + 60.0, None, 0.0
 
     def pusher_turned() -> float:
@@ -810,6 +822,84 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     # Stopped within turn_stall (and the arm's lag) of the pusher turning on from there.
     turned_on = pusher_turned() - stuck_at
     assert 0.0 < turned_on < executor.settings.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
+
+
+def _rotation_executor(loop_parts, box_surface, degrees: float = 30.0, **overrides):
+    """An executor for a rotation of the box's default grasp about its grasp axis, freshly reset."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import invert
+
+    cell, loop, graph, tags = loop_parts
+    start = invert(cell.reset("box").object_in_gripper)
+    goal = start.copy()
+    goal[:3, :3] = Rotation.from_rotvec(np.deg2rad(degrees) * start[:3, 0]).as_matrix() @ start[:3, :3]
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    result = plan(graph, pose(start), pose(goal))
+    assert [p.kind.name for p in result.primitives] == ["ROTATION"]
+    return PlanExecutor(ExecutorSettings.defaults(**overrides), box_surface, result.primitives, result.principal_finger,
+                        1.0, cell.time, loop.camera_model(), tags)
+
+
+def test_a_push_that_meets_the_object_before_the_gap_is_closed_stops_closing_it(loop_parts, box_surface):
+    """The pusher closes its gap to the face at push speed; where the face is nearer than believed
+    the camera sees the object move and the P-controlled push takes over (a rotation's pusher went
+    on to shove the box 5 mm across the fingers, then out of them). Here the pushing arm's reported
+    pose is 5 mm short along the push once it is planned: it stops at the start 1 mm from the face, not 6."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import _slid_since
+
+    cell, loop, _, _ = loop_parts
+    executor = _rotation_executor(loop_parts, box_surface)
+    deadline, began = cell.time + 60.0, None
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done \
+            and cell.time < deadline:
+        loop.perceive()
+        observation = loop.observe()
+        if executor.push is not None and executor.step.name != "FIND_CONTACT":
+            pusher = observation.pusher.copy()
+            pusher[:3, 3] -= 0.005 * executor.push.direction
+            observation = replace(observation, pusher=pusher)
+        if executor.step.name == "EXECUTE" and executor.phase == "touch" and began is None:
+            began = cell.object_in_gripper("arm1")
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+    assert began is not None and executor.phase == "push", (executor.step, executor.result)
+    slid = _slid_since(began, cell.object_in_gripper("arm1"))
+    assert slid < 0.003, slid      # without the rule the pusher goes on the whole gap: 5 mm into the face
+
+
+def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_turning(loop_parts, box_surface):
+    """A rotation's pusher that shoves the object across the fingers instead of turning it pushes it
+    out of the grip (sim: the box at alpha 0.5): the push stops once the grasp has slid
+    `rotation_slide` on the object. Here the camera shows the object moving with the pusher, not turning."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import _slid_since
+    from dmg_planner.transforms import invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _rotation_executor(loop_parts, box_surface)
+    deadline, slid, touched = cell.time + 60.0, 0.0, None
+    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
+        loop.perceive()
+        observation = loop.observe()
+        if executor.step.name == "EXECUTE" and executor.phase == "push":
+            pusher = (invert(observation.holder) @ observation.pusher)[:3, 3]
+            touched = pusher if touched is None else touched
+            shoved = executor.pushed_reference.copy()
+            shoved[:3, 3] += pusher - touched    # along with the pusher from where it met the object, unturned
+            slid = _slid_since(executor.pushed_reference, shoved)
+            observation = replace(observation, object_in_holder=shoved, object_time=observation.time)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+    assert executor.step.name == "LEAVE", (executor.step, executor.result)
+    assert any("slid" in note for note in executor.notes), executor.notes
+    assert executor.settings.rotation_slide < slid < executor.settings.rotation_slide + 0.001, slid
 
 
 def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pose(loop_parts, box_surface):
