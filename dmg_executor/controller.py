@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists
 from dmg_executor.grip import tilt_hold_force
-from dmg_executor.push_points import ObjectSurface, PushError, exit_normals, rotation_push, translation_push
+from dmg_executor.push_points import ObjectSurface, PushError, PushPoint, exit_normals, rotation_push, translation_push
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
@@ -57,6 +57,8 @@ DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the 
 SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for pushes within this of its direction
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
+MISSED_TURN = np.deg2rad(10.0)   # a rotation's pusher turned this far with the object not turning 1 deg: it missed the face
+MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
 TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
 
 
@@ -152,6 +154,7 @@ class _Push:
     waypoints: list[np.ndarray]   # route ending at `start`
     orientations: list[np.ndarray]   # pusher orientation wanted at each waypoint (camera on the object)
     lever: float              # m, pusher distance from the grasp axis (rotations)
+    contact: PushPoint | None = None   # the push point on the object (object frame)
     other_views: list[np.ndarray] = field(default_factory=list)   # next best orientations at the push start
     homeward: bool = False    # not a push: the way back to where the pusher started, to plan afresh from there
     blind: bool = False       # the camera sees no tag from its start: done on dead reckoning
@@ -302,6 +305,8 @@ class PlanExecutor:
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
         self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
+        self.pushed_point: PushPoint | None = None   # ... and where on the object
+        self.missed: list[PushPoint] = []    # rotation pushes whose pusher turned without turning the object
         self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
@@ -652,6 +657,10 @@ class PlanExecutor:
                     except PushError as error:
                         problems.append(str(error))
                         continue
+                    if self._missed_before(push):
+                        problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm (object frame) "
+                                        "turned the pusher without the object before")
+                        continue
                     towards_palm = float((push.point - middle) @ palm)
                     if towards_palm >= palm_room:
                         problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm is too far "
@@ -736,7 +745,7 @@ class PlanExecutor:
         views, seen = views[first:], seen[first:]
         lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
-        return _Push(direction, direction_h, start, waypoints + [start], orientations, lever,
+        return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
                      _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])
 
     def _hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders) -> bool:
@@ -871,6 +880,7 @@ class PlanExecutor:
             self.pushed_reference = obs.object_in_holder.copy()
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
+            self.pushed_point = self.push.contact
             self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher,
                                        float(pusher[:3, 3] @ self.push.local_direction) + s.gap
                                        + self._shortfall(self.push.local_direction))
@@ -918,9 +928,13 @@ class PlanExecutor:
             if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
                 return self._tighten(obs)
             if self._turn_stalled(obs, turned):
+                if abs(turned) < TURN_GAIN:     # no turn to show for it (a noise 'gain' while turning in the air)
+                    return self._missed_the_face(obs, turned)
                 self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
                                   f"the object stopped turning with the pusher")
                 return self._tighten(obs)
+            if self.turn_mark is None and abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher)) > MISSED_TURN:
+                return self._missed_the_face(obs, turned)
             slid = _slid_since(self.pushed_reference, obs.object_in_holder)
             if slid > s.rotation_slide:
                 self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
@@ -945,6 +959,18 @@ class PlanExecutor:
             self.turn_mark = (pusher_turned, abs(turned))
             return False
         return mark is not None and pusher_turned - mark[0] > self.settings.turn_stall
+
+    def _missed_the_face(self, obs: Observation, turned: float) -> Command:
+        """The pusher turned without turning the object: that push is not planned again."""
+        self.missed.append(self.pushed_point)
+        self.notes.append(f"a rotation push of primitive {self.index} missed the object (it turned "
+                          f"{np.rad2deg(turned):.1f} deg): not tried there again")
+        return self._tighten(obs)
+
+    def _missed_before(self, push: PushPoint) -> bool:
+        near, aligned = MISSED_NEAR
+        return any(np.linalg.norm(push.point - m.point) < near and float(push.direction @ m.direction) > aligned
+                   for m in self.missed)
 
     def _tilt_slide(self, obs: Observation) -> float:
         """Pusher speed [m/s] along the grasp axis that steers a translated object's tilt back
@@ -982,7 +1008,13 @@ class PlanExecutor:
             pusher = apply(to_holder, obs.pusher[:3, 3])
             out = pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local
             self.retreat = apply(obs.holder, out)
-        if np.linalg.norm(self.retreat - obs.pusher[:3, 3]) < self.settings.waypoint_tolerance:
+        short = float(np.linalg.norm(self.retreat - obs.pusher[:3, 3]))
+        if short < self.settings.waypoint_tolerance or self._stalled(obs, self.retreat):
+            # Stuck on the way out (sim: 25 s in LEAVE after the last push, the grasp within tolerance),
+            # the next route starts from here.
+            if short >= self.settings.waypoint_tolerance:
+                self.notes.append(f"after a push of primitive {self.index} the pusher stopped backing out "
+                                  f"{short * 1000:.0f} mm short")
             self.retreat = None
             self._enter(Step.FIND_CONTACT, obs)
             return Command()
@@ -1021,7 +1053,12 @@ class PlanExecutor:
                 self._head_home(obs)
             except RouteError as error:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"cannot return the pusher: {error}")
-        if self._arrived(obs):
+        stalled = self._stalled(obs)
+        if self._arrived(obs) or stalled:
+            if stalled:     # its arm at a limit (sim: 25 s at the last waypoint, then STEP_TIMEOUT): done here
+                short = np.linalg.norm(self.push.waypoints[-1] - obs.pusher[:3, 3])
+                self.notes.append(f"the pusher stopped {short * 1000:.0f} mm short of where it started")
+                self.waypoint = len(self.push.waypoints) - 1
             self.waypoint += 1
             if self.waypoint == len(self.push.waypoints):
                 position, angle = self.final_errors(obs)
@@ -1039,12 +1076,15 @@ class PlanExecutor:
         return self._along_route(obs)
 
     # --- motion helpers
-    def _stalled(self, obs: Observation) -> bool:
-        """Has the pusher come no closer to the current waypoint for `stall_time`?"""
-        target, orientation = self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint]
+    def _stalled(self, obs: Observation, target: np.ndarray | None = None) -> bool:
+        """Has the pusher come no closer to `target` (by default the current waypoint, turned as wanted
+        there) for `stall_time`?"""
+        orientation = None
+        if target is None:
+            target, orientation = self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint]
         offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))
-        turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).magnitude()
-        key = target.tobytes() + orientation.tobytes()
+        turn = 0.0 if orientation is None else Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).magnitude()
+        key = target.tobytes() + (b"" if orientation is None else orientation.tobytes())
         headway = self.headway
         if (headway is None or headway.target != key or offset < headway.offset - HEADWAY[0]
                 or turn < headway.turn - HEADWAY[1]):
@@ -1109,13 +1149,22 @@ class PlanExecutor:
         return self.primitives[min(self.index, len(self.primitives) - 1)]
 
     def _judge_blind_push(self, obs: Observation) -> None:
-        """The first pose seen after a blind translation push: if it shows the object moved less than
+        """The first pose seen after a blind push. A translation: if it shows the object moved less than
         half the tolerance along the push while dead reckoning had it moved further than the
         tolerance, the pusher never reached the face - the pose it was placed by lay that much short
         along the push (a small correction would repeat the same miss). Pushes this way from now on
-        count the object as met that much further on."""
-        if (self._primitive.kind != PrimitiveKind.TRANSLATION or self.reckoning is None or not self.reckoning.blind
-                or self.pushed_reference is None):
+        count the object as met that much further on. A rotation that did not turn the object at all
+        while dead reckoning had it turned missed the face (sim: the plug's far side, the same push
+        planned five times): it is not planned again."""
+        if self.reckoning is None or not self.reckoning.blind or self.pushed_reference is None:
+            return
+        if self._primitive.kind == PrimitiveKind.ROTATION:
+            believed = _turned_since(self.pushed_reference, self.reckoned)
+            seen = _turned_since(self.pushed_reference, obs.object_in_holder)
+            if abs(believed) > 2 * TURN_GAIN and abs(seen) < TURN_GAIN and self.pushed_point is not None:
+                self.missed.append(self.pushed_point)
+                self.notes.append(f"a blind rotation push of primitive {self.index} did not turn the object (turned "
+                                  f"{np.rad2deg(seen):.1f} deg, believed {np.rad2deg(believed):.1f} deg): not tried there again")
             return
         direction = self.pushed_along
         believed = float((self.reckoned[:3, 3] - self.pushed_reference[:3, 3]) @ direction)

@@ -902,6 +902,78 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
     assert executor.settings.rotation_slide < slid < executor.settings.rotation_slide + 0.001, slid
 
 
+def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned_again(loop_parts, box_surface):
+    """A pusher turning in the air (the face not where the push was planned) would turn on until the
+    step's time limit, and the same push be planned again (sim: the plug's far side, five times).
+    Here the camera shows the object not turning at all: the push stops once the pusher has turned
+    MISSED_TURN, and the next push is planned elsewhere."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import MISSED_NEAR, MISSED_TURN, _turned_since
+    from dmg_planner.transforms import invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _rotation_executor(loop_parts, box_surface)
+    deadline, pusher_turned = cell.time + 60.0, 0.0
+    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
+        loop.perceive()
+        observation = loop.observe()
+        if executor.step.name == "EXECUTE" and executor.phase == "push":     # seen, freshly, where it was
+            observation = replace(observation, object_in_holder=executor.pushed_reference, object_time=observation.time)
+            pusher_turned = abs(_turned_since(executor.pushed_from, invert(observation.holder) @ observation.pusher))
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+    assert executor.step.name == "LEAVE", (executor.step, executor.result)
+    assert any("missed the object" in note for note in executor.notes), executor.notes
+    assert MISSED_TURN < pusher_turned < MISSED_TURN + np.deg2rad(1.0), np.rad2deg(pusher_turned)
+    missed = executor.missed[0]
+    while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    following = executor.push.contact
+    assert following is not None and not (np.linalg.norm(following.point - missed.point) < MISSED_NEAR[0]
+                                          and following.direction @ missed.direction > MISSED_NEAR[1])
+
+
+def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(loop_parts, box_surface):
+    """Backing out after a push, and again on its way home after the last one, the pushing arm stops
+    (a joint at its limit): after `stall_time` the run goes on from there, and ends there, with
+    notes instead of waiting out the step's time limit."""
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    while executor.step.name != "LEAVE" and not executor.done:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    while cell.time < stuck_until and executor.step.name == "LEAVE":   # fault: the pushing arm does not move
+        loop.perceive()
+        command = executor.update(loop.observe())
+        command.pusher[:] = 0.0
+        loop.apply(command)
+        cell.run(loop.control_period)
+    assert executor.step.name != "LEAVE" and not executor.done, (executor.step, executor.result)
+    assert any("stopped backing out" in note for note in executor.notes), executor.notes
+    deadline = cell.time + 60.0
+    while not executor.returning and not executor.done and cell.time < deadline:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    while cell.time < stuck_until and not executor.done:    # the same on the way home
+        loop.perceive()
+        command = executor.update(loop.observe())
+        command.pusher[:] = 0.0
+        loop.apply(command)
+        cell.run(loop.control_period)
+    assert executor.done, executor.step
+    assert executor.result.outcome == Outcome.OK, executor.result.message
+    assert "short of where it started" in executor.result.message
+
+
 def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pose(loop_parts, box_surface):
     """Once the grip has closed after a push, only a pose certain of its position can show a slip:
     poses that cannot be held (here stale ones after a push the camera lost) may be sure of a tilt
