@@ -974,6 +974,28 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     assert "short of where it started" in executor.result.message
 
 
+def test_a_rotation_is_not_pushed_from_where_the_camera_would_see_no_tag(loop_parts, box_surface):
+    """Where the executor's camera model says no view from any push start shows a tag (here it is told
+    the camera looks backwards), a translation goes on blind, on dead reckoning, but a rotation is
+    left with the reason: unseen, nothing would tell that its pusher slid off, shoved the object out
+    of the grip or turned in the air."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance
+
+    cell, loop, _, _ = loop_parts
+    backwards = np.diag([1.0, -1.0, -1.0, 1.0])      # the optical axis turned round
+    for make, outcome in ((_translation_executor, Outcome.OK), (_rotation_executor, Outcome.OUT_OF_TOLERANCE)):
+        executor = make(loop_parts, box_surface)
+        executor.camera = replace(executor.camera, in_pusher=executor.camera.in_pusher @ backwards)
+        start = cell.object_in_gripper("arm1")
+        result = loop.run(executor, time_limit=90)
+        assert result.outcome == outcome, result.message
+    assert "would see none of the object's tags" in result.message, result.message
+    assert distance(cell.object_in_gripper("arm1"), start)[0] < 0.001      # the rotation's object untouched
+
+
 def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pose(loop_parts, box_surface):
     """Once the grip has closed after a push, only a pose certain of its position can show a slip:
     poses that cannot be held (here stale ones after a push the camera lost) may be sure of a tilt
