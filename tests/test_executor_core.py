@@ -346,15 +346,22 @@ def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_part
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
 
 
+def _translation_under_way(loop_parts, box_surface):
+    """A translation's executor 50 ticks into its run: the pusher has set off."""
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    for _ in range(50):
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    return executor
+
+
 def test_an_object_slipping_in_the_closed_grip_aborts_with_slip_and_the_grip_closes(loop_parts, box_surface):
     from dmg_executor.controller import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
-    for _ in range(50):                         # the run starts: the pusher sets off
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+    executor = _translation_under_way(loop_parts, box_surface)
     cell.command_gripper("arm1", 0.0, 0.3)      # fault: gripper 1 goes weak, the box slides out by its weight
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.SLIP and "moved" in outcome.message
@@ -368,11 +375,7 @@ def test_an_object_knocked_out_of_the_grip_ends_the_run_saying_so(loop_parts, bo
     from dmg_executor.controller import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
-    for _ in range(50):                         # the run starts: the pusher sets off
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+    executor = _translation_under_way(loop_parts, box_surface)
     knocked = cell.time
     body = mujoco.mj_name2id(cell.model, mujoco.mjtObj.mjOBJ_BODY, "object")
     cell.data.xfrc_applied[body, :3] = 60.0 * cell.grasp_pose("arm1")[:3, 1]   # fault: a knock across the fingers
