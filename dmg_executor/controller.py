@@ -965,7 +965,8 @@ class PlanExecutor:
 
     def _missed_the_face(self, obs: Observation, turned: float) -> Command:
         """The pusher turned without turning the object: that push is not planned again."""
-        self.missed.append(self.pushed_point)
+        if self.pushed_point is not None:
+            self.missed.append(self.pushed_point)
         self.notes.append(f"a rotation push of primitive {self.index} missed the object (it turned "
                           f"{np.rad2deg(turned):.1f} deg): not tried there again")
         return self._tighten(obs)
