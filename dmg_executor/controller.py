@@ -930,14 +930,17 @@ class PlanExecutor:
             left = budget - turned
             if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
                 return self._tighten(obs)
-            if self._turn_stalled(obs, turned):
-                if abs(turned) < TURN_GAIN:     # no turn to show for it (a noise 'gain' while turning in the air)
-                    return self._missed_the_face(obs, turned)
+            pusher_turned = abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher))
+            stalled = self._turn_stalled(pusher_turned, turned)
+            if (stalled and abs(turned) < TURN_GAIN) or (self.turn_mark is None and pusher_turned > MISSED_TURN):
+                # No turn to show for it (a stall after a noise 'gain', or none at all): turning in the air.
+                self._mark_missed(f"a rotation push of primitive {self.index} missed the object (it turned "
+                                  f"{np.rad2deg(turned):.1f} deg): not tried there again")
+                return self._tighten(obs)
+            if stalled:
                 self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
                                   f"the object stopped turning with the pusher")
                 return self._tighten(obs)
-            if self.turn_mark is None and abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher)) > MISSED_TURN:
-                return self._missed_the_face(obs, turned)
             slid = _slid_since(self.pushed_reference, obs.object_in_holder)
             if slid > s.rotation_slide:
                 self.notes.append(f"a rotation push of primitive {self.index} stopped after {np.rad2deg(turned):.1f} deg: "
@@ -951,25 +954,22 @@ class PlanExecutor:
         command.holder_grip = self._loosened(obs)
         return command
 
-    def _turn_stalled(self, obs: Observation, turned: float) -> bool:
+    def _turn_stalled(self, pusher_turned: float, turned: float) -> bool:
         """Has the pusher turned `turn_stall` on since the object last gained TURN_GAIN with it? Then it
         no longer turns the object but shoves it out of the grip (sim: bracket and plug stuck at 31 deg
         - the pusher slid along the face into a corner - then 8-38 deg of tilt within 0.5 s). Counted
-        from the object's first gain: the pusher takes up the contact's slack first."""
-        pusher_turned = abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher))
+        from the object's first gain: the pusher takes up the contact's slack first. Both in rad, absolute."""
         mark = self.turn_mark
         if abs(turned) >= (TURN_GAIN if mark is None else mark[1] + TURN_GAIN):
             self.turn_mark = (pusher_turned, abs(turned))
             return False
         return mark is not None and pusher_turned - mark[0] > self.settings.turn_stall
 
-    def _missed_the_face(self, obs: Observation, turned: float) -> Command:
+    def _mark_missed(self, note: str) -> None:
         """The pusher turned without turning the object: that push is not planned again."""
         if self.pushed_point is not None:
             self.missed.append(self.pushed_point)
-        self.notes.append(f"a rotation push of primitive {self.index} missed the object (it turned "
-                          f"{np.rad2deg(turned):.1f} deg): not tried there again")
-        return self._tighten(obs)
+        self.notes.append(note)
 
     def _missed_before(self, push: PushPoint) -> bool:
         near, aligned = MISSED_NEAR
@@ -1165,9 +1165,8 @@ class PlanExecutor:
         if self._primitive.kind == PrimitiveKind.ROTATION:
             believed = _turned_since(self.pushed_reference, self.reckoned)
             seen = _turned_since(self.pushed_reference, obs.object_in_holder)
-            if abs(believed) > 2 * TURN_GAIN and abs(seen) < TURN_GAIN and self.pushed_point is not None:
-                self.missed.append(self.pushed_point)
-                self.notes.append(f"a blind rotation push of primitive {self.index} did not turn the object (turned "
+            if abs(believed) > 2 * TURN_GAIN and abs(seen) < TURN_GAIN:
+                self._mark_missed(f"a blind rotation push of primitive {self.index} did not turn the object (turned "
                                   f"{np.rad2deg(seen):.1f} deg, believed {np.rad2deg(believed):.1f} deg): not tried there again")
             return
         direction = self.pushed_along

@@ -288,8 +288,8 @@ def loop_parts():
     cell.close()
 
 
-def _translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, **overrides):
-    """An executor for a translation (15 mm) of the box's default grasp along the fingers, freshly reset."""
+def _box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, **overrides):
+    """An executor for the plan from the box's default grasp (freshly reset) to goal_from_start(start)."""
     from scipy.spatial.transform import Rotation
 
     from dmg_executor.controller import PlanExecutor
@@ -299,12 +299,43 @@ def _translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: f
 
     cell, loop, graph, tags = loop_parts
     start = invert(cell.reset("box").object_in_gripper)
-    goal = start.copy()
-    goal[:3, 3] += length * start[:3, 2]
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
-    result = plan(graph, pose(start), pose(goal))
+    result = plan(graph, pose(start), pose(goal_from_start(start)))
     return PlanExecutor(ExecutorSettings.defaults(**overrides), box_surface, result.primitives,
                         result.principal_finger, alpha, cell.time, loop.camera_model(), tags)
+
+
+def _translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, **overrides):
+    """An executor for a translation (15 mm) of the box's default grasp along the fingers, freshly reset."""
+    def goal(start: np.ndarray) -> np.ndarray:
+        moved = start.copy()
+        moved[:3, 3] += length * start[:3, 2]
+        return moved
+    return _box_executor(loop_parts, box_surface, goal, alpha, **overrides)
+
+
+def _rotation_executor(loop_parts, box_surface):
+    """An executor for a 30 deg rotation of the box's default grasp about its grasp axis, freshly reset."""
+    from scipy.spatial.transform import Rotation
+
+    def goal(start: np.ndarray) -> np.ndarray:
+        turned = start.copy()
+        turned[:3, :3] = Rotation.from_rotvec(np.deg2rad(30.0) * start[:3, 0]).as_matrix() @ start[:3, :3]
+        return turned
+    executor = _box_executor(loop_parts, box_surface, goal)
+    assert [p.kind.name for p in executor.primitives] == ["ROTATION"]
+    return executor
+
+
+def _tick(loop, executor, pusher_stuck: bool = False) -> None:
+    """One control tick of the closed loop; `pusher_stuck`: the pushing arm ignores its command
+    (a joint at its limit)."""
+    loop.perceive()
+    command = executor.update(loop.observe())
+    if pusher_stuck:
+        command.pusher[:] = 0.0
+    loop.apply(command)
+    loop.cell.run(loop.control_period)
 
 
 def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
@@ -348,12 +379,10 @@ def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_part
 
 def _translation_under_way(loop_parts, box_surface):
     """A translation's executor 50 ticks into its run: the pusher has set off."""
-    cell, loop, _, _ = loop_parts
+    loop = loop_parts[1]
     executor = _translation_executor(loop_parts, box_surface)
     for _ in range(50):
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+        _tick(loop, executor)
     return executor
 
 
@@ -827,26 +856,6 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     assert 0.0 < turned_on < executor.settings.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
 
 
-def _rotation_executor(loop_parts, box_surface, degrees: float = 30.0, **overrides):
-    """An executor for a rotation of the box's default grasp about its grasp axis, freshly reset."""
-    from scipy.spatial.transform import Rotation
-
-    from dmg_executor.controller import PlanExecutor
-    from dmg_executor.settings import ExecutorSettings
-    from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import invert
-
-    cell, loop, graph, tags = loop_parts
-    start = invert(cell.reset("box").object_in_gripper)
-    goal = start.copy()
-    goal[:3, :3] = Rotation.from_rotvec(np.deg2rad(degrees) * start[:3, 0]).as_matrix() @ start[:3, :3]
-    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
-    result = plan(graph, pose(start), pose(goal))
-    assert [p.kind.name for p in result.primitives] == ["ROTATION"]
-    return PlanExecutor(ExecutorSettings.defaults(**overrides), box_surface, result.primitives, result.principal_finger,
-                        1.0, cell.time, loop.camera_model(), tags)
-
-
 def test_a_push_that_meets_the_object_before_the_gap_is_closed_stops_closing_it(loop_parts, box_surface):
     """The pusher closes its gap to the face at push speed; where the face is nearer than believed
     the camera sees the object move and the P-controlled push takes over (a rotation's pusher went
@@ -931,9 +940,7 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     assert MISSED_TURN < pusher_turned < MISSED_TURN + np.deg2rad(1.0), np.rad2deg(pusher_turned)
     missed = executor.missed[0]
     while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+        _tick(loop, executor)
     following = executor.push.contact
     assert following is not None and not (np.linalg.norm(following.point - missed.point) < MISSED_NEAR[0]
                                           and following.direction @ missed.direction > MISSED_NEAR[1])
@@ -948,30 +955,18 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
     while executor.step.name != "LEAVE" and not executor.done:
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+        _tick(loop, executor)
     stuck_until = cell.time + executor.settings.stall_time + 1.0
     while cell.time < stuck_until and executor.step.name == "LEAVE":   # fault: the pushing arm does not move
-        loop.perceive()
-        command = executor.update(loop.observe())
-        command.pusher[:] = 0.0
-        loop.apply(command)
-        cell.run(loop.control_period)
+        _tick(loop, executor, pusher_stuck=True)
     assert executor.step.name != "LEAVE" and not executor.done, (executor.step, executor.result)
     assert any("stopped backing out" in note for note in executor.notes), executor.notes
     deadline = cell.time + 60.0
     while not executor.returning and not executor.done and cell.time < deadline:
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
+        _tick(loop, executor)
     stuck_until = cell.time + executor.settings.stall_time + 1.0
     while cell.time < stuck_until and not executor.done:    # the same on the way home
-        loop.perceive()
-        command = executor.update(loop.observe())
-        command.pusher[:] = 0.0
-        loop.apply(command)
-        cell.run(loop.control_period)
+        _tick(loop, executor, pusher_stuck=True)
     assert executor.done, executor.step
     assert executor.result.outcome == Outcome.OK, executor.result.message
     assert "short of where it started" in executor.result.message
