@@ -88,7 +88,8 @@ def test_object_pose_in_the_gripper_matches_ground_truth(cell):
     status = watcher.wait_for(lambda: (s := watcher.latest.get("/perception/status")) and s.state == s.TRACKING and s,
                               what="TRACKING status")
     assert status.object_id == "box" and status.tags_used == 2 and status.reprojection_error < 0.5
-    detections = watcher.latest["/perception/detections"].detections
+    # Its own topic: the first detections message may arrive after the status that says TRACKING.
+    detections = watcher.wait_for(lambda: watcher.latest.get("/perception/detections"), what="detections").detections
     assert {(d.id, d.used, d.known) for d in detections} == {(0, True, True), (1, True, True)}
     debug = watcher.wait_for(lambda: watcher.latest.get("/perception/debug_image"), what="debug image")
     assert (debug.width, debug.height, debug.encoding) == (640, 480, "rgb8")
