@@ -47,6 +47,7 @@ RETRY_FACTOR = 2.0    # another push when the remaining error exceeds this many 
 WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
 EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
+LEADING_TIP = 0.5      # tips one behind the other: the one ahead along the push by at least this share of their spacing
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
 TURN_GAIN = np.deg2rad(1.0)   # the object turning this much with the pusher is progress (pose noise: up to 0.5 deg)
@@ -236,6 +237,19 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     While the object slides, nothing else resists a turn about that axis."""
     axis = np.cross(direction, [1.0, 0.0, 0.0])
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
+
+
+def leading_tip_offset(direction: np.ndarray, orientation: np.ndarray, axis: np.ndarray, tip_radius: float) -> float:
+    """How far [m] along the grasp axis `axis` the closed pusher's fingertip that meets the face first
+    sits from its grasp frame (turned `orientation`), when one tip is clearly ahead along `direction`
+    (tips one behind the other: LEADING_TIP); 0 for tips side by side, where which one touches first
+    is down to the arm's tracking. A push starts moved back by it: that tip's contact off the grasp's
+    middle tilts the sliding object off its grasp axis (sim, bracket: a tip 1.8 mm off, 2.3 deg of
+    tilt over an 8 mm blind push, about d x x as that torque turns it)."""
+    ahead = float(direction @ orientation[:, 0])
+    if abs(ahead) < LEADING_TIP:
+        return 0.0
+    return math.copysign(tip_radius, ahead) * float(axis @ orientation[:, 0])
 
 
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
@@ -739,7 +753,8 @@ class PlanExecutor:
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first).
         for first, view in enumerate(views):
-            start = point - (self._reach(direction, view) + s.gap) * direction
+            start = point - (self._reach(direction, view) + s.gap) * direction - leading_tip_offset(
+                direction, view, holder[:3, 0], s.tip_radius) * holder[:3, 0]
             if not self._hands_clash(start, view, occluders):
                 break
         else:
