@@ -245,7 +245,8 @@ class Cell:
         control = self.config.control
         jacobian = self._jacobian
         mujoco.mj_jacSite(self.model, self.data, jacobian[:3], jacobian[3:], arm.site)
-        columns = jacobian[:, arm.dofs]
+        weights = np.repeat([control.position_weight, 1.0], 3)
+        columns, twist = weights[:, None] * jacobian[:, arm.dofs], weights * twist
         reference = self.data.act[arm.activations]
         free = np.ones(len(arm.dofs), bool)
         for _ in range(len(arm.dofs)):

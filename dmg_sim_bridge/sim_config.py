@@ -21,6 +21,7 @@ class ControlSpec:
     singular_threshold: float
     joint_limit_margin: float
     posture_gain: float
+    position_weight: float
     max_linear_speed: float
     max_angular_speed: float
     watchdog: float

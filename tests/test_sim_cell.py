@@ -115,6 +115,22 @@ def test_the_pushing_hand_rolls_90_deg_either_way_about_its_fingers_from_home(ce
     assert np.rad2deg(turned) > 85.0 and moved < 0.003
 
 
+@pytest.mark.parametrize("axis, sign", [(0, 1.0), (1, 1.0), (1, -1.0)])
+def test_a_turn_the_arm_cannot_finish_leaves_the_fingertips_where_they_were(cell, axis, sign):
+    # Turned on about its own x or y past what its joints allow, the hand stops turning; its grasp
+    # frame stays put instead of swinging (at equal weights of motion and turning: 166-592 mm).
+    cell.reset()
+    start = cell.grasp_pose("arm2")
+    farthest = 0.0
+    for _ in range(400):
+        cell.command_twist("arm2", np.zeros(3), sign * 0.6 * start[:3, axis])
+        cell.run(0.01)
+        farthest = max(farthest, float(np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - start[:3, 3])))
+    turned = Rotation.from_matrix(cell.grasp_pose("arm2")[:3, :3] @ start[:3, :3].T).magnitude()
+    assert np.rad2deg(turned) < 0.6 * 4.0 * 180 / np.pi - 10.0      # it did hit a limit
+    assert farthest < 0.02, farthest
+
+
 def test_push_with_loosened_grip_translates_the_object_by_the_pushed_distance(cell):
     gap, travel = 0.01, 0.03
     before, after = push_from_below(cell, lateral_offset=0.0, gap=gap, travel=travel, grip=2.0)
