@@ -240,8 +240,10 @@ class Cell:
 
     # --- stepping -------------------------------------------------------------------------
     def joint_velocities(self, arm: Arm, twist: np.ndarray) -> np.ndarray:
-        """Joint velocities realising `twist` at the grasp site, within joint position and speed limits;
-        the redundant joint moves, unseen by the task, back towards the home posture."""
+        """Joint velocities realising `twist` at the grasp site, within joint position and speed limits
+        (where they cannot, the grasp site's motion weighs `position_weight` more than its turning:
+        the fingertips stay on their path); the redundant joint moves, unseen by the task, back
+        towards the home posture."""
         control = self.config.control
         jacobian = self._jacobian
         mujoco.mj_jacSite(self.model, self.data, jacobian[:3], jacobian[3:], arm.site)
