@@ -117,6 +117,8 @@ class Cell:
         self.data: mujoco.MjData | None = None
         self.arms: dict[str, Arm] = {}
         self._jacobian = None
+        # Rows of a twist and its Jacobian: motion weighs position_weight more than turning (see joint_velocities).
+        self._task_weights = np.repeat([self.config.control.position_weight, 1.0], 3)
         self._solutions: dict[tuple[str, bytes], np.ndarray] = {}   # IK results; the arms are the same in every model
 
     # --- building -------------------------------------------------------------------------
@@ -247,7 +249,7 @@ class Cell:
         control = self.config.control
         jacobian = self._jacobian
         mujoco.mj_jacSite(self.model, self.data, jacobian[:3], jacobian[3:], arm.site)
-        weights = np.repeat([control.position_weight, 1.0], 3)
+        weights = self._task_weights
         columns, twist = weights[:, None] * jacobian[:, arm.dofs], weights * twist
         reference = self.data.act[arm.activations]
         free = np.ones(len(arm.dofs), bool)
