@@ -1,7 +1,7 @@
 """config/sim.yaml: the cell's physics, gripper, arms, control and camera, as typed values."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -79,20 +79,46 @@ def _pose(entry: dict) -> np.ndarray:
     return from_rotation(Rotation.from_euler("xyz", entry["rpy_deg"], degrees=True).as_matrix(), entry["xyz"])
 
 
+def _section(document: dict, name: str, spec: type, path: Path) -> dict:
+    """Section `name` as keyword arguments of dataclass `spec`: a user's sim.yaml that lacks a
+    key without a default (an older copy) or misspells one is told which, not met with a TypeError."""
+    entry = document.get(name)
+    if not isinstance(entry, dict):
+        raise ValueError(f"{path}: section '{name}' is missing or not a mapping")
+    known = {f.name for f in fields(spec)}
+    required = {f.name for f in fields(spec) if f.default is MISSING and f.default_factory is MISSING}
+    missing, unknown = sorted(required - entry.keys()), sorted(entry.keys() - known)
+    if missing or unknown:
+        raise ValueError(f"{path}: section '{name}': " + "; ".join(
+            f"{label} {', '.join(keys)}" for label, keys in (("missing", missing), ("unknown", unknown)) if keys)
+            + " (config/sim.yaml in the repository has them all)")
+    return dict(entry)
+
+
 def load_sim_config(path: Path | None = None) -> SimConfig:
-    path = path or config_dir() / "sim.yaml"
-    document = yaml.safe_load(Path(path).read_text())
-    gripper = dict(document["gripper"])
-    gripper["friction"] = tuple(gripper["friction"])
+    path = Path(path or config_dir() / "sim.yaml")
+    document = yaml.safe_load(path.read_text())
+    if not isinstance(document, dict):
+        raise ValueError(f"{path}: not a YAML mapping")
+    try:
+        return _sim_config(document, path)
+    except KeyError as missing:
+        raise ValueError(f"{path}: key {missing} is missing (config/sim.yaml in the repository has them all)") from None
+
+
+def _sim_config(document: dict, path: Path) -> SimConfig:
+    gripper = _section(document, "gripper", GripperSpec, path)
+    if "friction" in gripper:
+        gripper["friction"] = tuple(gripper["friction"])
     arms = dict(document["arms"])
     if sorted(arms) != list(ARM_ROLES) or sorted(arms.values()) != ["left", "right"]:
         raise ValueError(f"{path}: arms must map arm1 and arm2 to left and right, got {arms}")
-    camera = CameraSpec(**document["camera"])
+    camera = CameraSpec(**_section(document, "camera", CameraSpec, path))
     if camera.arm not in ARM_ROLES:
         raise ValueError(f"{path}: camera.arm must be one of {ARM_ROLES}, got {camera.arm!r}")
     tolerance = document["settle_tolerance"]
     return SimConfig(
-        document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**document["control"]),
+        document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**_section(document, "control", ControlSpec, path)),
         camera=camera, arms=arms, home={role: _pose(document["home"][role]) for role in ARM_ROLES},
         ik_seed=np.asarray(document["ik_seed"], float), wrist_roll_room={role: float(document["wrist_roll_room"][role]) for role in ARM_ROLES},
         object=str(document["object"]),

@@ -5,13 +5,16 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+import yaml
 from scipy.spatial.transform import Rotation
 
 from dmg_perception.tags import detector, tag_corners
-from dmg_planner.objects import load_object, object_names
+from dmg_planner.objects import config_dir, load_object, object_names
 from dmg_planner.transforms import distance, invert
 from dmg_sim_bridge.cell import Cell, CellError
+from dmg_sim_bridge.gripper import GripperSpec
 from dmg_sim_bridge.recording import FrameRecorder
+from dmg_sim_bridge.sim_config import load_sim_config
 
 PUSH_SPEED = 0.01   # m/s
 
@@ -203,3 +206,21 @@ def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, tar
     assert len(saved) == 3 and saved[0].shape == (480, 640, 3)
     _, ids, _ = detector().detectMarkers(cv2.cvtColor(saved[-1], cv2.COLOR_BGR2GRAY))
     assert ids is not None          # the saved frame still shows the tags
+
+
+@pytest.mark.parametrize("edit, named", [
+    (lambda d: d["control"].pop("position_weight"), "missing position_weight"),
+    (lambda d: d["camera"].update(fxx=1.0), "unknown fxx"),
+    (lambda d: d.pop("home"), "'home' is missing"),
+])
+def test_a_sim_yaml_lacking_or_misspelling_a_key_is_refused_naming_it(tmp_path, edit, named):
+    document = yaml.safe_load((config_dir() / "sim.yaml").read_text())
+    edit(document)
+    path = tmp_path / "sim.yaml"
+    path.write_text(yaml.safe_dump(document))
+    with pytest.raises(ValueError, match=named):
+        load_sim_config(path)
+    document_ok = yaml.safe_load((config_dir() / "sim.yaml").read_text())
+    del document_ok["gripper"]["kp"]        # a gripper key with a default may be left out
+    path.write_text(yaml.safe_dump(document_ok))
+    assert load_sim_config(path).gripper.kp == GripperSpec().kp
