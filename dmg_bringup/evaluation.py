@@ -15,6 +15,7 @@ import json
 import math
 import sys
 import time
+import zlib
 from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -81,6 +82,12 @@ def _matrix_pose(matrix, row: int) -> np.ndarray:
 def _gripper_pose(transform: np.ndarray):
     from dmg_planner.search import GripperPose
     return GripperPose(transform[:3, 3], Rotation.from_matrix(transform[:3, :3]).as_quat())
+
+
+def object_rng(seed: int, name: str) -> np.random.Generator:
+    """The goal choice's random numbers for one object: the same pairs whichever objects run
+    with it (`dmg eval --objects plug` repeats the full set's plug pairs)."""
+    return np.random.default_rng([seed, zlib.crc32(name.encode())])
 
 
 def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, rng: np.random.Generator,
@@ -259,14 +266,14 @@ def run_eval(args: argparse.Namespace) -> int:
     models = [load_object(name) for name in settings.objects]
     cell = Cell()
     loop = ClosedLoop(cell, ObjectPoseEstimator(models))
-    rng = np.random.default_rng(settings.seed)
     runs: list[RunOutcome] = []
     try:
         for model in models:
             graph = library.load_config_object(model.name, wait=True).entry.graph
             matrix = manipulability_matrix(graph)
             handed_over = invert(cell.reset(model.name).object_in_gripper)
-            pairs = make_pairs(graph, matrix, handed_over, settings, rng, library.search_defaults)
+            pairs = make_pairs(graph, matrix, handed_over, settings, object_rng(settings.seed, model.name),
+                               library.search_defaults)
             print(f"== {model.name}: {len(pairs)} pairs from the manipulability matrix ({len(matrix.matrix)} poses, "
                   f"{matrix.block_sizes.size} blocks)", flush=True)
             surface, tags = ObjectSurface.of(model), TagLayout.of(model)
