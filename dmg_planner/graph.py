@@ -34,7 +34,7 @@ from dmg_planner.supervoxels import vccs
 FORMAT_VERSION = 1
 # Bump when a code change alters the graphs built from the same input: it is part of the
 # cache key, so no planner serves a graph built by older code.
-ALGORITHM_VERSION = 2
+ALGORITHM_VERSION = 3
 
 
 @dataclass
@@ -169,7 +169,8 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
                  p: GraphParameters) -> tuple[np.ndarray, np.ndarray]:
     """Rays that sweep the finger's volume: ((S, A, K, 6) origin + unit direction, (K,) lengths).
 
-    The finger is a box: from the contact along direction d for length l, across the tangent
+    The finger is a box: from `finger_tip_overhang` before the contact (the round fingertip
+    reaches that far past it, away from the palm) along direction d to length l, across the tangent
     plane over [-w/2, w/2], and off the surface from a clearance of one voxel to the
     thickness t. Rays run along its length on a grid over the cross-section (including its
     four long edges), across its width at both ends, and across its width along the length
@@ -189,16 +190,18 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
     n = normals[:, None, None, :]
     base = positions[:, None, None, :]
     along_u, along_h = (g.ravel() for g in np.meshgrid(lateral, heights, indexing="ij"))
-    along = base + along_u[:, None] * side + along_h[:, None] * n              # (S, A, L*H, 3)
+    overhang = p.finger_tip_overhang
+    along = base - overhang * d[:, :, None, :] + along_u[:, None] * side + along_h[:, None] * n   # (S, A, L*H, 3)
     # Across the width: at both ends on every layer, and every ray_spacing along the length on
     # the lowest layer (anything rising from the surface into the finger crosses that layer).
-    stations = np.linspace(0.0, p.finger_length, max(2, int(np.ceil(p.finger_length / p.ray_spacing)) + 1))
-    across_s = np.concatenate([np.repeat([0.0, p.finger_length], len(heights)), stations[1:-1]])
+    reach = p.finger_length + overhang
+    stations = np.linspace(-overhang, p.finger_length, max(2, int(np.ceil(reach / p.ray_spacing)) + 1))
+    across_s = np.concatenate([np.repeat([-overhang, p.finger_length], len(heights)), stations[1:-1]])
     across_h = np.concatenate([np.tile(heights, 2), np.full(len(stations) - 2, heights[0])])
     across = base + across_s[:, None] * d[:, :, None, :] - (p.finger_width / 2) * side + across_h[:, None] * n
     origins = np.concatenate([along, across], axis=2)
     directions = np.concatenate([np.broadcast_to(d[:, :, None, :], along.shape), np.broadcast_to(side, across.shape)], axis=2)
-    lengths = np.concatenate([np.full(along.shape[2], p.finger_length), np.full(across.shape[2], p.finger_width)])
+    lengths = np.concatenate([np.full(along.shape[2], reach), np.full(across.shape[2], p.finger_width)])
     return np.concatenate([origins, directions], axis=-1), lengths
 
 

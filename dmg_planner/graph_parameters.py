@@ -19,6 +19,7 @@ class GraphParameters:
     finger_length: float = 0.1
     finger_width: float = 0.02
     finger_thickness: float = 0.01
+    finger_tip_overhang: float = 0.008   # how far the fingertip reaches past the contact, away from the palm
     ray_spacing: float = 0.005   # largest gap between the rays that sweep the finger's volume
 
     def validate(self) -> None:

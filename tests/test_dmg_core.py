@@ -55,8 +55,9 @@ def finger_footprint(contact: np.ndarray, direction: np.ndarray, length: float, 
 def expected_blocked(graph, vertex: int, plane_axes: tuple[int, int], obstacles: list[np.ndarray]):
     """Per finger angle: True/False where the 2-D geometry is unambiguous, None near a boundary.
 
-    The finger's footprint in the face plane against the obstacles' footprints (obstacles
-    taller than the finger). Near the boundary (footprint grown or shrunk by a ray spacing
+    The finger's footprint in the face plane (from its round tip's overhang before the contact
+    to its length towards the palm) against the obstacles' footprints (obstacles taller than
+    the finger). Near the boundary (footprint grown or shrunk by a ray spacing
     changes the answer) the ray model may differ by construction, so no claim there.
     """
     p = graph.parameters
@@ -69,7 +70,8 @@ def expected_blocked(graph, vertex: int, plane_axes: tuple[int, int], obstacles:
         margin = p.ray_spacing
         results = set()
         for grow in (-margin, 0.0, margin):
-            footprint = finger_footprint(contact - d * max(grow, 0.0), d, p.finger_length + 2 * grow,
+            overhang = p.finger_tip_overhang + max(grow, 0.0)
+            footprint = finger_footprint(contact - d * overhang, d, p.finger_length + p.finger_tip_overhang + 2 * grow,
                                          p.finger_width + 2 * grow)
             results.add(any(rectangles_overlap(footprint, obstacle) for obstacle in obstacles))
         answers.append(results.pop() if len(results) == 1 else None)
@@ -103,16 +105,16 @@ def test_bracket_wall_blocks_a_long_finger_exactly_where_geometry_says(bracket):
     checked = blocked_somewhere = 0
     for vertex in top:
         expected = expected_blocked(bracket, vertex, (0, 1), [wall])
+        blocked_somewhere += any(expected)
         for angle_index, answer in enumerate(expected):
             if answer is None:
                 continue
             checked += 1
-            blocked_somewhere += answer
             assert bracket.admissible[vertex, angle_index] == (not answer), (
                 f"vertex at {bracket.positions[vertex]} angle {np.rad2deg(bracket.angles[angle_index])}: "
                 f"expected {'blocked' if answer else 'free'}")
     assert checked > 0.8 * len(top) * bracket.parameters.angle_count
-    assert blocked_somewhere > 0.2 * checked, "the 100 mm finger reaches the wall from most of the plate"
+    assert blocked_somewhere > 0.5 * len(top), "the 100 mm finger reaches the wall from most of the plate"
 
 
 def test_plug_has_two_angular_components_between_the_prongs(plug):
@@ -132,14 +134,16 @@ def test_plug_has_two_angular_components_between_the_prongs(plug):
         for angle_index, answer in enumerate(expected_blocked(plug, vertex, (1, 2), prongs)):
             if answer is not None:
                 assert plug.admissible[vertex, angle_index] == (not answer)
-    # Everywhere else on the face the sets follow the same geometry.
+    # Everywhere else on the face the sets follow the same geometry (vertices left with no free
+    # angle, dropped from the graph, included).
+    face = np.flatnonzero((np.abs(plug.normals[:, 0] - 1) < 1e-6) & (np.abs(plug.positions[:, 0] - 0.025) < 1e-6))
     checked = 0
-    for vertex in front:
+    for vertex in face:
         for angle_index, answer in enumerate(expected_blocked(plug, vertex, (1, 2), prongs)):
             if answer is not None:
                 checked += 1
                 assert plug.admissible[vertex, angle_index] == (not answer), plug.positions[vertex]
-    assert checked > 0.5 * len(front) * plug.parameters.angle_count
+    assert checked > 0.5 * len(face) * plug.parameters.angle_count
 
 
 def test_one_face_plan_is_one_straight_merged_translation_with_valid_secondary(box):

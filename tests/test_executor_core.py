@@ -1087,9 +1087,10 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
 
 
 def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by_the_pusher(loop_parts):
-    """A grasp of the plug (one of dmg eval's): pushed 10 mm along the fingers without steering, the
-    sliding plug turns off its grasp axis (nothing resists while it slides); with the pusher sliding
-    along the grasp axis against the tilt it sees, it stays near the axis."""
+    """A grasp of the plug with one fingertip seated on a prong (planned with the paper's finger box
+    from the contact, finger_tip_overhang 0; stop 26's eval start): pushed 10 mm along the fingers
+    without steering, the sliding plug turns off its grasp axis (nothing resists while it slides);
+    with the pusher sliding along the grasp axis against the tilt it sees, it stays near the axis."""
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
@@ -1105,7 +1106,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
 
     cell = loop_parts[0]
     model = load_object("plug")
-    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    parameters = GraphParameters(seed_resolution=model.seed_resolution, finger_tip_overhang=0.0)
     graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
     loop, surface, tags = ClosedLoop(cell, ObjectPoseEstimator([model])), ObjectSurface.of(model), TagLayout.of(model)
     start = np.eye(4)
