@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import binomtest
 
 from dmg_bringup.environment import load_settings
 from dmg_planner.objects import object_names
@@ -165,8 +166,12 @@ def summarise(runs: list[RunOutcome]) -> dict:
         per_primitive = [r.sim_time / r.primitives for r in group if r.primitives]
         quantiles = lambda v: {q: float(np.percentile(v, p)) for q, p in (("median", 50), ("p90", 90), ("max", 100))} \
             if len(v) else {}   # noqa: E731
-        return {"runs": len(group), "successes": sum(r.success for r in group),
-                "success_rate": sum(r.success for r in group) / len(group) if group else math.nan,
+        successes = sum(r.success for r in group)
+        interval = binomtest(successes, len(group)).proportion_ci(0.95, "wilson") if group else None
+        return {"runs": len(group), "successes": successes,
+                "success_rate": successes / len(group) if group else math.nan,
+                # a few dozen runs pin the rate down only so far: its 95 % (Wilson) interval
+                "success_rate_ci95": [interval.low, interval.high] if interval else [math.nan, math.nan],
                 "position_error_mm": quantiles(positions), "angle_error_deg": quantiles(angles),
                 "tilt_deg": quantiles(tilts),
                 "sim_seconds_per_primitive": quantiles(np.array(per_primitive)),
@@ -181,13 +186,15 @@ def markdown(summary: dict, runs: list[RunOutcome]) -> str:
     def row(name: str, s: dict) -> str:
         pos, ang, tilt, ppp = s["position_error_mm"], s["angle_error_deg"], s["tilt_deg"], s["sim_seconds_per_primitive"]
         failures = ", ".join(f"{k} {v}" for k, v in s["failures"].items()) or "-"
-        return (f"| {name} | {s['successes']}/{s['runs']} ({s['success_rate'] * 100:.0f} %) | "
+        low, high = s["success_rate_ci95"]
+        return (f"| {name} | {s['successes']}/{s['runs']} ({s['success_rate'] * 100:.0f} %; "
+                f"{low * 100:.0f}-{high * 100:.0f} %) | "
                 f"{pos.get('median', math.nan):.2f} / {pos.get('p90', math.nan):.2f} | "
                 f"{ang.get('median', math.nan):.2f} / {ang.get('p90', math.nan):.2f} | "
                 f"{tilt.get('median', math.nan):.2f} / {tilt.get('p90', math.nan):.2f} | "
                 f"{ppp.get('median', math.nan):.1f} | {failures} |")
 
-    lines = ["| runs | success | position error median / p90 [mm] | angle error median / p90 [deg] | "
+    lines = ["| runs | success (95 % interval) | position error median / p90 [mm] | angle error median / p90 [deg] | "
              "of it tilt off the grasp axis median / p90 [deg] | sim s per primitive (median) | failures |",
              "|---|---|---|---|---|---|---|",
              row("all", summary["overall"])]

@@ -70,6 +70,8 @@ def test_eval_smoke_set_writes_a_consistent_report(tmp_path):
     runs, overall = report["runs"], report["summary"]["overall"]
     assert len(runs) == 2 and overall["runs"] == 2
     assert overall["successes"] == sum(run["success"] for run in runs)
+    low, high = overall["success_rate_ci95"]          # two runs say little: a wide interval round the rate
+    assert 0.0 <= low <= overall["success_rate"] <= high <= 1.0 and high - low > 0.5
     for run in runs:
         assert run["object"] == "box" and run["alpha"] == 1.0 and run["outcome"]
         if run["success"]:
