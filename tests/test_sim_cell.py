@@ -214,13 +214,19 @@ def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, tar
     (lambda d: d.pop("home"), "'home' is missing"),
 ])
 def test_a_sim_yaml_lacking_or_misspelling_a_key_is_refused_naming_it(tmp_path, edit, named):
+    with pytest.raises(ValueError, match=named):
+        load_sim_config(_edited_sim_yaml(tmp_path, edit))
+
+
+def test_a_sim_yaml_may_leave_out_a_gripper_key_that_has_a_default(tmp_path):
+    path = _edited_sim_yaml(tmp_path, lambda d: d["gripper"].pop("kp"))
+    assert load_sim_config(path).gripper.kp == GripperSpec().kp
+
+
+def _edited_sim_yaml(tmp_path, edit):
+    """The shipped config/sim.yaml changed by `edit`, written to tmp_path."""
     document = yaml.safe_load((config_dir() / "sim.yaml").read_text())
     edit(document)
     path = tmp_path / "sim.yaml"
     path.write_text(yaml.safe_dump(document))
-    with pytest.raises(ValueError, match=named):
-        load_sim_config(path)
-    document_ok = yaml.safe_load((config_dir() / "sim.yaml").read_text())
-    del document_ok["gripper"]["kp"]        # a gripper key with a default may be left out
-    path.write_text(yaml.safe_dump(document_ok))
-    assert load_sim_config(path).gripper.kp == GripperSpec().kp
+    return path
