@@ -239,17 +239,19 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
 
 
-def leading_tip_offset(direction: np.ndarray, orientation: np.ndarray, axis: np.ndarray, tip_radius: float) -> float:
-    """How far [m] along the grasp axis `axis` the closed pusher's fingertip that meets the face first
-    sits from its grasp frame (turned `orientation`), when one tip is clearly ahead along `direction`
-    (tips one behind the other: LEADING_TIP); 0 for tips side by side, where which one touches first
-    is down to the arm's tracking. A push starts moved back by it: that tip's contact off the grasp's
-    middle tilts the sliding object off its grasp axis (sim, bracket: a tip 1.8 mm off, 2.3 deg of
-    tilt over an 8 mm blind push, about d x x as that torque turns it)."""
+def leading_tip(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """Where [m, across `direction`] the closed pusher's fingertip that meets the face first sits from
+    its grasp frame (turned `orientation`), when one tip is clearly ahead along `direction` (tips one
+    behind the other: LEADING_TIP); zero for tips side by side, where which one touches first is down
+    to the arm's tracking. A push starts moved back by it, so that tip meets the face on the push line:
+    a contact off the line turns the sliding object (sim, bracket: a tip 1.8 mm off along the grasp
+    axis, 2.3 deg of tilt over an 8 mm blind push; box: a tip 6.6 mm off across it, 26 deg about the
+    grasp axis over a 3 mm push)."""
     ahead = float(direction @ orientation[:, 0])
     if abs(ahead) < LEADING_TIP:
-        return 0.0
-    return math.copysign(tip_radius, ahead) * float(axis @ orientation[:, 0])
+        return np.zeros(3)
+    tip = math.copysign(tip_radius, ahead) * orientation[:, 0]
+    return tip - (tip @ direction) * direction
 
 
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
@@ -753,15 +755,16 @@ class PlanExecutor:
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first).
         for first, view in enumerate(views):
-            start = point - (self._reach(direction, view) + s.gap) * direction - leading_tip_offset(
-                direction, view, holder[:3, 0], s.tip_radius) * holder[:3, 0]
+            start = point - (self._reach(direction, view) + s.gap) * direction - leading_tip(
+                direction, view, s.tip_radius)
             if not self._hands_clash(start, view, occluders):
                 break
         else:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              "would put the pusher's hand into the holding gripper however it is turned")
         views, seen = views[first:], seen[first:]
-        lever = float(np.linalg.norm(np.cross(start - holder[:3, 3], holder[:3, 0])))
+        touching = start + leading_tip(direction, views[0], s.tip_radius)
+        lever = float(np.linalg.norm(np.cross(touching - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
                      _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])
@@ -935,7 +938,8 @@ class PlanExecutor:
             speed = float(np.clip(s.linear_gain * along, s.min_push_speed, s.push_speed))
             # Keep the push line through the grasp axis: an offset across it would turn the object.
             across = np.cross(self.push.direction, holder[:3, 0])
-            offset = float((obs.pusher[:3, 3] - holder[:3, 3]) @ across)
+            touching = obs.pusher[:3, 3] + leading_tip(self.push.direction, obs.pusher[:3, :3], s.tip_radius)
+            offset = float((touching - holder[:3, 3]) @ across)
             relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across
                                        + self._tilt_slide(obs) * holder[:3, 0], np.zeros(3)])
         else:

@@ -158,22 +158,25 @@ def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lev
         pytest.approx(-np.deg2rad(2.0))
 
 
-def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_grasps_middle():
-    from dmg_executor.controller import leading_tip_offset
+def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_line():
+    from dmg_executor.controller import LEADING_TIP, leading_tip
 
-    radius, grasp_axis, push = 0.008, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-    spread = np.deg2rad(15.0)
-    # Tips one behind the other along the push (the hand's x), spread 15 deg along the grasp axis.
-    in_line = Rotation.from_rotvec([0.0, 0.0, np.pi / 2 - spread]).as_matrix()
-    for direction in (push, -push):
-        offset = leading_tip_offset(direction, in_line, grasp_axis, radius)
-        ahead = max((+radius * in_line[:, 0], -radius * in_line[:, 0]), key=lambda tip: float(tip @ direction))
-        assert ahead[0] == pytest.approx(offset) and abs(offset) == pytest.approx(radius * np.sin(spread))
-        # Started moved back by it, the tip ahead lies on the grasp's middle plane (x = 0).
-        assert (ahead - offset * grasp_axis)[0] == pytest.approx(0.0, abs=1e-12)
-    # Tips side by side across the push: neither is ahead, nothing to move.
-    side_by_side = Rotation.from_rotvec([0.0, -(np.pi / 2 - spread), 0.0]).as_matrix()
-    assert leading_tip_offset(push, side_by_side, grasp_axis, radius) == 0.0
+    radius, push = 0.008, np.array([0.0, 1.0, 0.0])
+    ahead_count = 0
+    for orientation in Rotation.random(200, random_state=3).as_matrix():
+        for direction in (push, -push):
+            offset = leading_tip(direction, orientation, radius)
+            assert offset @ direction == pytest.approx(0.0, abs=1e-12)   # across the push only
+            tips = (+radius * orientation[:, 0], -radius * orientation[:, 0])
+            ahead = max(tips, key=lambda tip: float(tip @ direction))
+            if abs(float(orientation[:, 0] @ direction)) < LEADING_TIP:
+                # Tips side by side: neither is clearly ahead, nothing to move.
+                assert not offset.any()
+                continue
+            ahead_count += 1
+            # Started moved back by it, the tip ahead lies on the push line through the grasp frame.
+            assert np.linalg.norm(np.cross(ahead - offset, direction)) == pytest.approx(0.0, abs=1e-12)
+    assert 50 < ahead_count < 350   # both cases were exercised
 
 
 def test_push_points_that_do_not_exist_are_refused(box_surface):
