@@ -60,6 +60,7 @@ class ExecutorSettings:
     slip_distance: float
     slip_angle: float              # rad
     slip_poses: int
+    reference_poses: int
     slip_tilt_sigma: float         # rad
     slip_position_sigma: float
     step_timeout: float
