@@ -127,7 +127,7 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
 
     began = time.perf_counter()
     cell = loop.cell
-    cell.reset(model.name, object_in_gripper=invert(pair.start))
+    cell.reset(model.name, object_in_gripper=invert(pair.start), restart_clock=True)   # each run on its own
     loop.watch(settings.settle)
 
     def outcome(name: str, message: str, **values) -> RunOutcome:

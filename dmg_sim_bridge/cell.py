@@ -359,11 +359,15 @@ class Cell:
         return found[0], found[1]
 
     def reset(self, object_name: str = "", object_in_gripper: np.ndarray | None = None,
-              grip_force: float = 0.0) -> ResetResult:
+              grip_force: float = 0.0, restart_clock: bool = False) -> ResetResult:
         """Arms to their home poses, the object held by gripper 1 at `object_in_gripper` (4x4).
 
         None = the object's default grasp. The gripper is symmetric, so the object is centred
         between the fingers along the grasp axis. On failure the previous scene is kept.
+        Simulated time goes on from where it was (a clock behind ROS never runs backwards)
+        unless `restart_clock`: then it starts at 0, and what follows does not depend on what
+        ran before (the clock's offset alone changes floating-point sums and which control tick
+        a camera frame falls on, and a push's outcome with them).
         """
         spec = self.config.gripper
         grip_force = float(_finite(grip_force, "grip force"))
@@ -375,7 +379,7 @@ class Cell:
         try:
             object_model, model = self._model_for(object_name or self.config.object)
             self._bind(object_model, model)
-            self.data.time = previous[2].time if previous else 0.0   # simulated time never runs backwards
+            self.data.time = previous[2].time if previous and not restart_clock else 0.0
             return self._place(object_in_gripper, grip_force or spec.max_force)
         except CellError:
             if previous is not None:
