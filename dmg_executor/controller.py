@@ -777,15 +777,14 @@ class PlanExecutor:
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first).
         for first, view in enumerate(views):
-            start = point - (self._reach(direction, view) + s.gap) * direction - leading_tip(
-                direction, view, s.tip_radius)
+            touching = point - (self._reach(direction, view) + s.gap) * direction   # the leading tip, if any
+            start = touching - leading_tip(direction, view, s.tip_radius)
             if not self._hands_clash(start, view, occluders):
                 break
         else:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              "would put the pusher's hand into the holding gripper however it is turned")
         views, seen = views[first:], seen[first:]
-        touching = start + leading_tip(direction, views[0], s.tip_radius)
         lever = float(np.linalg.norm(np.cross(touching - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
