@@ -61,6 +61,7 @@ DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan'
 MISSED_TURN = np.deg2rad(10.0)   # a rotation's pusher turned this far with the object not turning 1 deg: it missed the face
 MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
 TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
+HOLDER_MOVED = (0.01, np.deg2rad(10.0))   # m, rad: gripper 1 this far from where it started (pushes at alpha < 1) may go back
 
 
 class Step(IntEnum):
@@ -177,6 +178,7 @@ class _HolderTurn:
 
     angle: float                  # rad to turn about the holder's z (its finger axis)
     back: bool                    # turning back to where the camera sees the object's tags
+    home: np.ndarray | None = None     # instead of turning: back to this pose (where the holder started)
     clearing: bool = True         # the pusher still on its way back to where it started
     turned: float = 0.0           # rad turned so far (summed tick by tick: a half turn has no unique rotation vector)
     last: np.ndarray | None = None     # holder orientation at the previous tick
@@ -333,6 +335,7 @@ class PlanExecutor:
         self.far_side = False           # the holder turned: the pusher faces the side it could not reach
         self.far_side_pushed = False    # ... and has pushed there: turn back to look
         self.may_turn = True            # false once a turn stopped short (the wrist at a limit)
+        self.may_return = True          # false once the holder could not go back to where it started
         self.unseen_from = -math.inf    # being unseen counts from here (turns, blind pushes: expected)
         self.holder_start: np.ndarray | None = None
         self.pusher_home: np.ndarray | None = None
@@ -511,6 +514,8 @@ class PlanExecutor:
         try:
             self.push = self._plan_push(primitive, obs)
         except (PushError, RouteError) as error:
+            if self._push_when_returned(primitive, obs):
+                return self._start_holder_turn(obs, back=False, home=self.holder_start)
             if self._push_when_turned(primitive, obs):
                 return self._start_holder_turn(obs, back=False)
             self.far_side_pushed = self.far_side     # (turned, and still no push: turn back)
@@ -547,6 +552,26 @@ class PlanExecutor:
             return False
         return True
 
+    def _push_when_returned(self, primitive: Primitive, obs: Observation) -> bool:
+        """At alpha < 1 the holder moves in the pushes (at 0 it does all of a rotation: turned 45 deg
+        about its grasp axis, its hand is where the pusher has to go). Would the pusher, back where it
+        started, find a push for `primitive` with the holder back where it started, holding the object
+        as it does now (or with the holder then turning the object's far side towards it)?"""
+        offset, turned = self._holder_moved(obs)
+        if not self.may_return or self.far_side or (offset < HOLDER_MOVED[0] and turned < HOLDER_MOVED[1]):
+            return False
+        returned = replace(obs, holder=self.holder_start.copy(), pusher=self.pusher_home.copy())
+        try:
+            self._plan_push(primitive, returned)
+        except (PushError, RouteError):
+            return self._push_when_turned(primitive, returned)
+        return True
+
+    def _holder_moved(self, obs: Observation) -> tuple[float, float]:
+        """How far [m] and how much [rad] the holder's grasp frame is from where it started."""
+        offset = float(np.linalg.norm(obs.holder[:3, 3] - self.holder_start[:3, 3]))
+        return offset, float(Rotation.from_matrix(self.holder_start[:3, :3] @ obs.holder[:3, :3].T).magnitude())
+
     def _turn_radius(self, obs: Observation) -> float:
         """How far from the holder's finger axis the pusher's tip must be while the holder turns the object."""
         s = self.settings
@@ -559,13 +584,18 @@ class PlanExecutor:
         local = apply(invert(obs.holder), place)
         return float(np.hypot(local[0], local[1])) > self._turn_radius(obs)
 
-    def _start_holder_turn(self, obs: Observation, back: bool) -> Command:
+    def _start_holder_turn(self, obs: Observation, back: bool, home: np.ndarray | None = None) -> Command:
         """The pusher back to where it started, then the holder turns the object: `holder_turn` to show
-        the pusher the far side, or back after the push there."""
-        angle = -self.settings.holder_turn if back else self.settings.holder_turn
-        self.holder_turn = _HolderTurn(angle, back)
+        the pusher the far side, or back after the push there; or, given `home`, the holder goes there."""
+        angle = 0.0 if home is not None else -self.settings.holder_turn if back else self.settings.holder_turn
+        self.holder_turn = _HolderTurn(angle, back, None if home is None else home.copy())
         self.far_side_pushed = False
-        if not back:
+        if home is not None:
+            offset, turned = self._holder_moved(obs)
+            self.notes.append(f"primitive {self.index}: the holding gripper went back to where it started (it had "
+                              f"moved {offset * 1000:.0f} mm and turned {np.rad2deg(turned):.0f} deg in the pushes) "
+                              "for a push it could not be given where it was")
+        elif not back:
             self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
                               f"{np.rad2deg(angle):.0f} deg about its fingers for a push on its far side")
         try:
@@ -592,17 +622,23 @@ class PlanExecutor:
                     return self._abort(Outcome.LIMIT_VIOLATION, "the pusher cannot get out of reach of the object "
                                        "the holding gripper must turn back")
                 # Nothing turned yet: that push is given up like any other the pusher cannot get to.
-                self.notes.append("the holding gripper did not turn the object: the pusher could not get out of "
-                                  "its reach")
-                self.holder_turn, self.may_turn = None, False
+                self.notes.append(f"the holding gripper did not {'go back' if turn.home is not None else 'turn the object'}: "
+                                  "the pusher could not get out of its reach")
+                self.holder_turn = None
+                if turn.home is not None:
+                    self.may_return = False
+                else:
+                    self.may_turn = False
                 self._enter(Step.FIND_CONTACT, obs)
                 return Command()
             turn.clearing, turn.place, turn.last = False, obs.holder[:3, 3].copy(), obs.holder[:3, :3].copy()
-            turn.progress = (0.0, obs.time)
+            turn.progress = (math.inf if turn.home is not None else 0.0, obs.time)   # (turned or left, when)
             # The grip is closed: the object stays where it was seen; the next reference is the first
             # image after the turn back.
             self.held_reference, self.reference_pending = None, True
             self.reckoned, self.reckoned_time = obs.object_in_holder.copy(), math.inf
+        if turn.home is not None:
+            return self._holder_home(obs)
         current = obs.holder[:3, :3]
         turn.turned += float(Rotation.from_matrix(turn.last.T @ current).as_rotvec()[2])
         turn.last = current.copy()
@@ -624,6 +660,29 @@ class PlanExecutor:
             return Command()
         rate = float(np.clip(s.approach_gain * left, -s.max_angular_speed, s.max_angular_speed))
         return Command(holder=np.concatenate([s.approach_gain * (turn.place - obs.holder[:3, 3]), rate * current[:, 2]]))
+
+    def _holder_home(self, obs: Observation) -> Command:
+        """The holder (the grip closed, the pusher clear) back to where it started at a P-controlled
+        speed; one that stops gaining (an arm at a limit) stays where it got to."""
+        s, turn = self.settings, self.holder_turn
+        offset = turn.home[:3, 3] - obs.holder[:3, 3]
+        rotation = Rotation.from_matrix(turn.home[:3, :3] @ obs.holder[:3, :3].T).as_rotvec()
+        distance_left, angle_left = float(np.linalg.norm(offset)), float(np.linalg.norm(rotation))
+        if distance_left < s.waypoint_tolerance and angle_left < WAYPOINT_TURN_TOLERANCE:
+            self.holder_turn, self.reckoned_time = None, obs.time
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
+        left = distance_left + angle_left * HEADWAY[0] / HEADWAY[1]     # headway in either counts
+        if left < turn.progress[0] - HEADWAY[0]:
+            turn.progress = (left, obs.time)
+        if obs.time - turn.progress[1] > s.stall_time:
+            self.notes.append(f"the holding gripper stopped {distance_left * 1000:.0f} mm and "
+                              f"{np.rad2deg(angle_left):.0f} deg short of where it started")
+            self.holder_turn, self.may_return, self.reckoned_time = None, False, obs.time
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
+        return Command(holder=np.concatenate([_limited(s.approach_gain * offset, s.approach_speed),
+                                              _limited(s.approach_gain * rotation, s.max_angular_speed)]))
 
     def _add_correction(self, obs: Observation, failed: PrimitiveKind | None = None) -> None:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,

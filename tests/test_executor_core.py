@@ -746,6 +746,54 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_sid
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
+def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_has_gone_back(loop_parts, box_surface):
+    """At alpha 0 the holder does all of a rotation: turned 45 deg about its grasp axis, its hand is
+    where the pusher would have to go for the next translation (the box 13 mm along its length).
+    It goes back to where it started, the box held as it is, and the push is found from there."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, graph, tags = loop_parts
+
+    def grasp(x: float, turn_deg: float) -> np.ndarray:       # on the box's top/bottom faces, its x along the grasp
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("xyz", [turn_deg, 0.0, 90.0], degrees=True).as_matrix()
+        pose[:3, 3] = [x, 0.0, -0.0005]
+        return pose
+
+    cell.reset("box", object_in_gripper=invert(grasp(0.0085, 90.0)))
+    loop.watch(0.5)
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    planned = plan(graph, pose(invert(loop.seen)), pose(grasp(-0.0045, 135.0)))
+    assert [p.kind.name for p in planned.primitives] == ["ROTATION", "TRANSLATION"]
+    executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, planned.primitives, planned.principal_finger,
+                            0.0, cell.time, loop.camera_model(), tags)
+    holder_start, going_back, back = cell.grasp_pose("arm1"), None, None
+    ends = cell.time + 90.0
+    while not executor.done and cell.time < ends and not (back is not None and executor.index == 1
+                                                          and executor.step.name == "EXECUTE"):
+        _tick(loop, executor)
+        turn = executor.holder_turn
+        if turn is not None and turn.home is not None and not turn.clearing and going_back is None:
+            going_back = (cell.grasp_pose("arm1"), cell.object_in_gripper("arm1"))
+        if going_back is not None and back is None and turn is None:
+            back = (cell.grasp_pose("arm1"), cell.object_in_gripper("arm1"))
+    assert going_back is not None and back is not None, executor.notes
+    assert any("went back to where it started" in note for note in executor.notes), executor.notes
+    moved_away = distance(going_back[0], holder_start)
+    assert np.rad2deg(moved_away[1]) > 30.0                       # the rotation had turned the holder ...
+    returned = distance(back[0], holder_start)
+    assert returned[0] < 0.005 and np.rad2deg(returned[1]) < 5.0  # ... it went back ...
+    held = distance(back[1], going_back[1])
+    assert held[0] < 0.002 and np.rad2deg(held[1]) < 2.0          # ... with the box as it held it
+    assert not executor.done and executor.index == 1 and executor.step.name == "EXECUTE"   # and pushes from there
+    assert not any("no safe push" in note for note in executor.notes), executor.notes
+
+
 def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loop_parts, box_surface):
     from dataclasses import replace
 
