@@ -829,6 +829,11 @@ class PlanExecutor:
         point_h = apply(to_holder, point)
         direction_h = to_holder[:3, :3] @ direction
         outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
+        if outside_h[2] < box.low[2]:
+            # The line leaves the kept-free space through its palm end: the pusher would come up along
+            # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
+            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along "
+                             "the holding gripper's hand from its palm side")
         pusher_h = apply(to_holder, obs.pusher[:3, 3])
         waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         # Where the push starts, the tips must not be spread along the grasp axis.

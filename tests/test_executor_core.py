@@ -746,6 +746,34 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_sid
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
+def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
+    """A push line that leaves the space kept free round the object through its palm end would bring
+    the pusher 300 mm up along gripper 1's hand and arm (sim: 12 s with the object unseen, then
+    OBJECT_LOST): refused, while one across the fingers from the same grasp is routed."""
+    from dmg_executor.push_points import PushPoint
+    from dmg_executor.routes import RouteError
+    from dmg_executor.views import Occluders
+    from dmg_planner.transforms import invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    loop.watch(0.5)
+    obs = loop.observe()
+    executor.update(obs)
+    holder_in_object = invert(obs.object_in_holder)
+    middle, occluders = holder_in_object[:3, 3], Occluders.of(executor.shape, obs.holder, obs.opening)
+
+    def push_towards(holder_direction: np.ndarray) -> PushPoint:    # the object pushed that way (holder frame)
+        direction = holder_in_object[:3, :3] @ holder_direction
+        point, normal = box_surface.entry(middle, direction)
+        return PushPoint(point, normal, direction)
+
+    with pytest.raises(RouteError, match="from its palm side"):
+        executor._push_from(obs, push_towards(np.array([0.0, 0.0, 1.0])), occluders)   # out towards the fingertips
+    across, _ = executor._push_from(obs, push_towards(np.array([0.0, 1.0, 0.0])), occluders)
+    assert np.linalg.norm(across.start - obs.holder[:3, 3]) < 0.1      # starts beside the grasp, not 300 mm off
+
+
 def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_has_gone_back(loop_parts, box_surface):
     """At alpha 0 the holder does all of a rotation: turned 45 deg about its grasp axis, its hand is
     where the pusher would have to go for the next translation (the box 13 mm along its length).
