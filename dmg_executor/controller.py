@@ -557,7 +557,7 @@ class PlanExecutor:
         about its grasp axis, its hand is where the pusher has to go). Would the pusher, back where it
         started, find a push for `primitive` with the holder back where it started, holding the object
         as it does now (or with the holder then turning the object's far side towards it)?"""
-        offset, turned = self._holder_moved(obs)
+        offset, turned = distance(self.holder_start, obs.holder)
         if not self.may_return or self.far_side or (offset < HOLDER_MOVED[0] and turned < HOLDER_MOVED[1]):
             return False
         returned = replace(obs, holder=self.holder_start.copy(), pusher=self.pusher_home.copy())
@@ -566,11 +566,6 @@ class PlanExecutor:
         except (PushError, RouteError):
             return self._push_when_turned(primitive, returned)
         return True
-
-    def _holder_moved(self, obs: Observation) -> tuple[float, float]:
-        """How far [m] and how much [rad] the holder's grasp frame is from where it started."""
-        offset = float(np.linalg.norm(obs.holder[:3, 3] - self.holder_start[:3, 3]))
-        return offset, float(Rotation.from_matrix(self.holder_start[:3, :3] @ obs.holder[:3, :3].T).magnitude())
 
     def _turn_radius(self, obs: Observation) -> float:
         """How far from the holder's finger axis the pusher's tip must be while the holder turns the object."""
@@ -591,7 +586,7 @@ class PlanExecutor:
         self.holder_turn = _HolderTurn(angle, back, None if home is None else home.copy())
         self.far_side_pushed = False
         if home is not None:
-            offset, turned = self._holder_moved(obs)
+            offset, turned = distance(self.holder_start, obs.holder)
             self.notes.append(f"primitive {self.index}: the holding gripper went back to where it started (it had "
                               f"moved {offset * 1000:.0f} mm and turned {np.rad2deg(turned):.0f} deg in the pushes) "
                               "for a push it could not be given where it was")
