@@ -55,6 +55,7 @@ HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to wher
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
 DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
+SAME_PUSH = np.deg2rad(10.0)   # a rotation push square onto a face this close to one across or along the fingers is that one
 SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for pushes within this of its direction
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
@@ -407,14 +408,18 @@ class PlanExecutor:
             elif not known.blind:
                 known.blind = True
                 self.notes.append(f"a push of primitive {self.index} went on unseen, on dead reckoning")
-            self.reckoned, self.reckoned_time = self._dead_reckoning(obs), obs.time
+            self.reckoned, self.reckoned_time = known.believed(invert(obs.holder) @ obs.pusher), obs.time
         elif not fresh and not s.blind_pushes and self.step == Step.EXECUTE and self.phase != "tighten":
             self.notes.append(f"a push of primitive {self.index} stopped: object unseen for "
                               f"{obs.time - obs.object_time:.2f} s")
             return self._tighten(obs)
         elif self.reckoned is not None and fresh and obs.object_time >= self.reckoned_time:
-            self._judge_blind_push(obs)
-            self.reckoned = None      # seen again after the push
+            # Seen again after the push. Only a pose certain of its position judges it: an uncertain one
+            # (a lone tag seen obliquely; sim: 11 mm off at 4 mm sigma) would have every later push that
+            # way reach further for a miss that was not.
+            if obs.object_position_sigma <= s.slip_position_sigma:
+                self._judge_blind_push(obs)
+            self.reckoned = None
         if fresh and self.reckoned is None and (self.reference_pending or self._reference_uncertain(obs)):
             self._hold(obs)     # the first fresh pose since the grip closed, or a more certain one
         fault = self._limits(obs) or (self._slip(obs) if trusted else None)
@@ -710,7 +715,6 @@ class PlanExecutor:
         with its route and the pusher's orientations along it."""
         s = self.settings
         holder_in_object = invert(obs.object_in_holder)
-        middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
         occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             # Square onto a face round the grasp axis, along the normal line through the grasp's middle
@@ -720,6 +724,7 @@ class PlanExecutor:
             # such line (a curved object), along the motion itself.
             motion = self._remaining_motion(obs)
             directions = self._square_pushes(obs, motion, holder_in_object) or [motion]
+            middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
             pushes, problems = [], []
             for direction in directions:
                 try:   # the contact moves over the object opposite to the object's motion
@@ -731,45 +736,73 @@ class PlanExecutor:
             candidates = self._watched(obs, pushes, occluders)
             # The most progress: the full motion when the camera can watch it.
             return max(candidates, key=lambda c: float(motion @ (invert(obs.holder)[:3, :3] @ c[0].direction)))[0]
-        else:
-            limited = float(np.clip(self.errors[1], -s.max_push_angle, s.max_push_angle))
-            # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
-            # goes across the fingers (beyond their tips, or between them towards the palm where that
-            # fits) or along them towards the palm beside them, each at the full lever or shorter ones
-            # where the object is small; the camera decides among those it can watch.
-            palm = -holder_in_object[:3, 2]
-            palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
-            ranked, problems = [], []
-            for along_fingers, direction in ((False, holder_in_object[:3, 1]), (False, -holder_in_object[:3, 1]),
-                                             (True, palm)):
-                for depth in s.push_depth * LEVER_SHARES:
-                    try:
-                        push = rotation_push(self.surface, middle, holder_in_object[:3, 0], direction, -limited,
-                                             depth, 0.0, s.edge_margin)
-                    except PushError as error:
-                        problems.append(str(error))
-                        continue
-                    if self._missed_before(push):
-                        problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm (object frame) "
-                                        "turned the pusher without the object before")
-                        continue
-                    towards_palm = float((push.point - middle) @ palm)
-                    if towards_palm >= palm_room:
-                        problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm is too far "
-                                        "between the fingers towards the palm")
-                        continue
-                    # Preferred in this order: beyond the tips, along the fingers, towards the palm; long levers first.
-                    ranked.append(((1 if along_fingers else 0 if towards_palm < 0 else 2, -depth), push))
-            pushes = [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
-            if not pushes:
-                raise PushError("; ".join(problems))
-        candidates = self._watched(obs, pushes, occluders)
-        return max(candidates, key=lambda candidate: candidate[1])[0]   # first of the best: the longest lever beyond the tips
+        limited = float(np.clip(self.errors[1], -s.max_push_angle, s.max_push_angle))
+        # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
+        # goes across the fingers (beyond their tips, or between them towards the palm where that
+        # fits) or along them towards the palm beside them, as the paper's; where none of those can be
+        # pushed and watched (an object held across an edge: each meets a face slanted 45 deg near its
+        # edge), square onto another face round the grasp. (Left to the corrections after the plan
+        # instead, the plug's set did worse: a translation first slid it where the rotation then pushed
+        # it back towards the palm.)
+        paper = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+        faces = self._face_pushes(obs, holder_in_object)
+        faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(SAME_PUSH)]
+        problems = []
+        for directions in (paper, faces):
+            pushes = self._rotation_pushes(obs, directions, limited, problems)
+            try:
+                candidates = self._watched(obs, pushes, occluders) if pushes else []
+            except (PushError, RouteError) as error:
+                problems.append(str(error))
+                continue
+            if candidates:   # first of the best seen: the longest lever beyond the tips
+                return max(candidates, key=lambda candidate: candidate[1])[0]
+        raise PushError("; ".join(problems))
+
+    def _rotation_pushes(self, obs: Observation, directions: np.ndarray, angle: float, problems: list[str]) -> list[PushPoint]:
+        """Push points turning the object by `angle` about x, pushed along `directions` (holder frame),
+        each at the full lever or shorter ones where the object is small, in order of preference;
+        why others were not taken goes to `problems`."""
+        s = self.settings
+        holder_in_object = invert(obs.object_in_holder)
+        middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
+        palm = -holder_in_object[:3, 2]
+        palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
+        ranked = []
+        for along_fingers, direction in zip(directions[:, 2] < -np.cos(np.pi / 4), directions @ holder_in_object[:3, :3].T):
+            for depth in s.push_depth * LEVER_SHARES:
+                try:
+                    push = rotation_push(self.surface, middle, holder_in_object[:3, 0], direction, -angle,
+                                         depth, 0.0, s.edge_margin)
+                except PushError as error:
+                    problems.append(str(error))
+                    continue
+                if self._missed_before(push):
+                    problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm (object frame) "
+                                    "turned the pusher without the object before")
+                    continue
+                towards_palm = float((push.point - middle) @ palm)
+                if towards_palm >= palm_room:
+                    problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm is too far "
+                                    "between the fingers towards the palm")
+                    continue
+                # Preferred in this order: beyond the tips, along the fingers, towards the palm; long levers first.
+                ranked.append(((1 if along_fingers else 0 if towards_palm < 0 else 2, -depth), push))
+        return [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
 
     def _square_pushes(self, obs: Observation, motion: np.ndarray, holder_in_object: np.ndarray) -> list[np.ndarray]:
-        """Directions (holder frame, across the grasp axis) square onto the object's faces round the
-        grasp, within DETOUR_LIMIT of `motion` and moving the object more than the tolerance along it:
-        pushing along one slides the object without turning it."""
+        """Directions (holder frame) square onto the faces round the grasp within DETOUR_LIMIT of `motion`
+        and moving the object more than the tolerance along it: pushing along one slides the object
+        without turning it."""
+        pushes = self._face_pushes(obs, holder_in_object)
+        # ... and one that would move the object less than the tolerance along the motion is no push.
+        share = pushes @ motion
+        wanted = (share >= np.cos(DETOUR_LIMIT) * float(np.linalg.norm(motion))) & (share > self.settings.position_tolerance)
+        return list(pushes[wanted])
+
+    def _face_pushes(self, obs: Observation, holder_in_object: np.ndarray) -> np.ndarray:
+        """(k, 3) unit directions (holder frame, across the grasp axis) square onto the object's faces
+        round the grasp, one per face."""
         angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
         rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
         normals = exit_normals(self.surface, holder_in_object[:3, 3], rays @ holder_in_object[:3, :3].T)
@@ -777,11 +810,7 @@ class PlanExecutor:
         pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
         lengths = np.linalg.norm(pushes, axis=1)
         pushes = pushes[lengths > 0.5] / lengths[lengths > 0.5, None]
-        pushes = pushes[np.unique(np.round(pushes, 2), axis=0, return_index=True)[1]]
-        # ... and one that would move the object less than the tolerance along the motion is no push.
-        share = pushes @ motion
-        wanted = (share >= np.cos(DETOUR_LIMIT) * float(np.linalg.norm(motion))) & (share > self.settings.position_tolerance)
-        return list(pushes[wanted])
+        return pushes[np.unique(np.round(pushes, 2), axis=0, return_index=True)[1]]
 
     def _watched(self, obs: Observation, pushes: list, occluders: Occluders) -> list[tuple[_Push, int]]:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
@@ -982,9 +1011,13 @@ class PlanExecutor:
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
             self.pushed_point = self.push.contact
-            self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher,
-                                       float(pusher[:3, 3] @ self.push.local_direction) + s.gap
-                                       + self._shortfall(self.push.local_direction))
+            # The pusher's tip stands `gap` short of the push point; it meets the face there (or further
+            # on, where blind pushes this way fell short).
+            along = self.push.local_direction
+            face = apply(obs.object_in_holder, self.push.contact.point)
+            self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher, apply(invert(pusher), face - s.gap * along),
+                                       face + self._shortfall(along) * along, along.copy(),
+                                       turning=primitive.kind == PrimitiveKind.ROTATION)
             self.reckoning.moved(obs.time, pusher)
             # Close the gap along the push line first, at push speed: turning from `gap` away, a rotation's
             # pusher would mostly slide past the face (its arc is tangent to the face, not into it); a
@@ -1292,10 +1325,6 @@ class PlanExecutor:
         motion[0] = 0.0       # along the grasp axis the fingers centre the object
         return motion
 
-    def _dead_reckoning(self, obs: Observation) -> np.ndarray:
-        """The pushed object's pose (holder frame) by the pusher's motion since it was last seen."""
-        translation = self.primitives[self.index].kind == PrimitiveKind.TRANSLATION
-        return self.reckoning.believed(invert(obs.holder) @ obs.pusher, self.push.local_direction if translation else None)
 
     def _measure(self, obs: Observation) -> None:
         if not self.primitives:

@@ -534,6 +534,34 @@ def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
 
 
+def test_a_blind_push_is_judged_short_only_by_a_pose_certain_of_its_position(loop_parts, box_surface):
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    tick = _half_a_second_into_the_push(loop, executor)
+    while executor.step.name == "EXECUTE" and executor.phase == "push" and not executor.done:
+        tick(perceive=False)                     # the push goes on unseen
+    assert executor.reckoned is not None and not executor.done, executor.result
+    # Then a lone tag seen obliquely: poses that show the box where it was before the push (as if the
+    # push had not reached it), their position sigma 4 mm.
+    doubtful = np.diag([0.004 ** 2] * 3 + [np.deg2rad(2.0) ** 2] * 3)
+    unpushed = executor.pushed_reference.copy()
+    for _ in range(5):
+        obs = loop.observe()
+        loop.apply(executor.update(replace(obs, object_in_holder=unpushed, object_time=obs.time, object_covariance=doubtful)))
+        cell.run(loop.control_period)
+    assert executor.reckoned is None                                       # seen again ...
+    assert not any("did not reach" in note for note in executor.notes), executor.notes   # ... but not judged by it
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert not executor.shortfalls
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
 def test_a_blind_push_that_falls_short_of_the_face_makes_the_next_push_that_way_reach_further(loop_parts, box_surface):
     from dataclasses import replace
 
@@ -582,19 +610,34 @@ def _pose(rotvec=(0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0)) -> np.ndarray:
     return matrix
 
 
-def test_dead_reckoning_turns_the_object_as_far_as_the_pusher_turned_round_the_grasp_axis_since_the_image():
+def test_dead_reckoning_turns_the_object_as_far_as_the_pusher_tip_swept_round_the_grasp_axis_past_the_face():
     from dmg_executor.reckoning import Reckoning
 
-    at_start = _pose(position=(0.0, 0.03, 0.0))                  # the pusher, holder frame
+    # A rotation push: the pusher's tip 4 mm ahead of its centre; it stands 30 mm from the grasp axis and
+    # meets the face after closing a 3 mm gap along the push (-z here: the object turns negatively about x).
+    tip = np.array([0.0, 0.0, -0.004])
+    along = np.array([0.0, 0.0, -1.0])
+    at_start = _pose(position=(0.0, 0.03, 0.0))
+    touch = at_start[:3, 3] + tip + 0.003 * along
     known = _pose((0.2, 0.05, 0.0), (0.0, 0.004, -0.002))        # the object when last seen
-    reckoning = Reckoning(known, at_start, contact_at=0.0)
+    reckoning = Reckoning(known, at_start, tip, touch, along, turning=True)
+
+    def pusher_at(angle: float, own_turn: float = 0.0) -> np.ndarray:
+        """The pusher with its tip swept `angle` round x from where it meets the face (turned itself by `own_turn`)."""
+        where = _pose((angle, 0.0, 0.0)) @ _pose(position=touch)
+        pusher = _pose((own_turn, 0.0, 0.0))
+        pusher[:3, 3] = where[:3, 3] - pusher[:3, :3] @ tip
+        return pusher
+
     reckoning.moved(1.0, at_start)
-    reckoning.moved(2.0, _pose((0.1, 0.0, 0.0), (0.0, 0.031, 0.003)))
-    reckoning.seen(known, at=1.2)     # an image of 1.2 s: it goes with the pusher as it was at 1.0 s
-    now = _pose((0.25, 0.0, 0.0), (0.0, 0.02, 0.01))             # turned 0.25 rad since then, and slid
-    np.testing.assert_allclose(reckoning.believed(now, None), _pose((0.25, 0.0, 0.0)) @ known, atol=1e-12)
-    reckoning.seen(known, at=2.5)     # a later image: the turn counts from the pusher at 2.0 s
-    np.testing.assert_allclose(reckoning.believed(now, None), _pose((0.15, 0.0, 0.0)) @ known, atol=1e-12)
+    np.testing.assert_allclose(reckoning.believed(pusher_at(0.0)), known, atol=1e-12)   # the gap closed: not turned yet
+    # the tip swept 0.25 rad (the pusher itself turned only 0.05): the object turned with the sweep
+    np.testing.assert_allclose(reckoning.believed(pusher_at(-0.25, own_turn=-0.05)), _pose((-0.25, 0.0, 0.0)) @ known,
+                               atol=1e-9)
+    reckoning.moved(2.0, pusher_at(-0.1))
+    reckoning.seen(known, at=2.5)     # an image of 2.5 s: the turn counts from the pusher at 2.0 s
+    np.testing.assert_allclose(reckoning.believed(pusher_at(-0.25)), _pose((-0.15, 0.0, 0.0)) @ known, atol=1e-9)
+    np.testing.assert_allclose(reckoning.believed(pusher_at(0.1)), known, atol=1e-12)   # backing off turns nothing
 
 
 def test_dead_reckoning_moves_the_object_along_the_push_only_once_the_gap_is_closed():
@@ -602,10 +645,11 @@ def test_dead_reckoning_moves_the_object_along_the_push_only_once_the_gap_is_clo
 
     along = np.array([0.0, -1.0, 0.0])
     known = _pose((0.0, 0.0, 0.3), (0.0, 0.002, 0.001))
-    reckoning = Reckoning(known, _pose(position=(0.0, 0.05, 0.0)), contact_at=-0.044)   # 6 mm gap
+    start = _pose(position=(0.0, 0.05, 0.0))
+    reckoning = Reckoning(known, start, np.zeros(3), start[:3, 3] + 0.006 * along, along, turning=False)   # 6 mm gap
     for travel, expected in ((0.004, 0.0), (0.006, 0.0), (0.016, 0.010)):
         sideways = _pose(position=(0.0, 0.05 - travel, 0.002))   # sliding across the push moves nothing
-        believed = reckoning.believed(sideways, along)
+        believed = reckoning.believed(sideways)
         np.testing.assert_allclose(believed[:3, 3], known[:3, 3] + expected * along, atol=1e-12)
         np.testing.assert_allclose(believed[:3, :3], known[:3, :3], atol=1e-12)
 
@@ -1246,3 +1290,52 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
 
     unsteered, steered = largest_tilt(0.0), largest_tilt(ExecutorSettings.defaults().tilt_gain)
     assert unsteered > 4.0 and steered < 2.0, (unsteered, steered)
+
+
+def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(loop_parts):
+    """The plug held 45 deg about its grasp axis from square (stop 27's eval pair 0): the pushes across
+    and along the fingers meet its faces at 45 deg within edge_margin of their edges; the one square
+    onto a face turns it."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_executor.views import TagLayout
+    from dmg_perception.estimator import ObjectPoseEstimator
+    from dmg_planner.graph import GraphParameters, build_graph
+    from dmg_planner.objects import load_object
+    from dmg_planner.search import GripperPose, plan
+    from dmg_planner.transforms import invert
+
+    cell = loop_parts[0]
+    model = load_object("plug")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+    loop, surface, tags = ClosedLoop(cell, ObjectPoseEstimator([model])), ObjectSurface.of(model), TagLayout.of(model)
+    start = np.eye(4)       # gripper 1 in the plug's frame: its fingers on the +-x faces, turned 45 deg about x
+    start[:3, :3], start[:3, 3] = Rotation.from_rotvec([np.pi / 4, 0.0, 0.0]).as_matrix(), [0.01, 0.005, -0.015]
+    goal = start.copy()
+    goal[:3, :3] = np.eye(3)
+    cell.reset("plug", object_in_gripper=invert(start))
+    loop.watch(0.5)
+    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
+    planned = plan(graph, pose(invert(loop.seen)), pose(goal))
+    assert [p.kind.name for p in planned.primitives][:1] == ["ROTATION"], planned.message
+    executor = PlanExecutor(ExecutorSettings.defaults(), surface, planned.primitives[:1], planned.principal_finger, 1.0,
+                            cell.time, loop.camera_model(), tags)
+    slants = []      # how far each push's face is slanted from the push [deg]
+    ends = cell.time + 60.0
+    while executor.index == 0 and not executor.done and cell.time < ends:     # the rotation (corrections follow)
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+        if executor.step.name == "EXECUTE" and (not slants or slants[-1][0] != executor.pushes):
+            push = executor.push.contact
+            slants.append((executor.pushes, np.rad2deg(np.arccos(-push.normal @ push.direction))))
+    assert executor.index == 1 and not any("left" in note for note in executor.notes), (executor.notes, executor.result)
+    assert slants and max(slant for _, slant in slants) < 10.0, slants     # square onto the face
+    turned = executor.primitives[0].gripper_after
+    turned_off = Rotation.from_matrix(invert(cell.object_in_gripper("arm1"))[:3, :3] @ turned[:3, :3].T).magnitude()
+    assert np.rad2deg(turned_off) < 3.0, np.rad2deg(turned_off)
