@@ -63,6 +63,11 @@ MISSED_TURN = np.deg2rad(10.0)   # a rotation's pusher turned this far with the 
 MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
 TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
 HOLDER_MOVED = (0.01, np.deg2rad(10.0))   # m, rad: gripper 1 this far from where it started (pushes at alpha < 1) may go back
+# Vantage places a lost held object is looked for from: where the pusher started, turned this far round
+# the grasp axis (the way a rotation turns the object, and with it the faces its tags are on).
+LOOK_TURNS = np.deg2rad([0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
+LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands) before the object counts as lost
+SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 
 
 class Step(IntEnum):
@@ -189,12 +194,15 @@ class _HolderTurn:
 
 @dataclass
 class _Look:
-    """Looking for the object from where the pusher stands: the orientations left to try, best first."""
+    """Looking for the held object: from one place, the pusher orientations left to try (best
+    first), then on to the next vantage place."""
 
     place: np.ndarray
     views: list[np.ndarray]
+    places: list[tuple[np.ndarray, np.ndarray]] | None = None   # vantage places left (base frame) and the view there
+    gone_to: int = 0              # vantage places gone to
     since: float | None = None    # when the pusher settled in the current view
-    homeward: bool = False        # all views tried: on the way back to where the run started
+    travelling: bool = False      # on the way to `place`
 
 
 def _largest_sigma(covariance: np.ndarray, axes: slice) -> float:
@@ -888,12 +896,14 @@ class PlanExecutor:
                 or overlap(placed(occluders.riding, pusher), occluders.hand))
 
     def _views(self, obs: Observation, place: np.ndarray, level: np.ndarray | None = None,
-               occluders: Occluders | None = None, in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Pusher orientations at `place`, best view of the object's tags first, and how many tags
-        each sees (without a camera model: only the orientation it started in, seeing none).
-        `occluders` also checks what hides tags (10x the time): for push starts, where a push
-        waits for a fresh pose; on the way there the held object may go unseen a while."""
-        neutral = self.pusher_home[:3, :3]
+               occluders: Occluders | None = None, in_line: np.ndarray | None = None,
+               neutral: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Pusher orientations at `place` (turned from `neutral`, by default the orientation it
+        started in), best view of the object's tags first, and how many tags each sees (without a
+        camera model: only `neutral`, seeing none). `occluders` also checks what hides tags (10x the
+        time): for push starts, where a push waits for a fresh pose; on the way there the held
+        object may go unseen a while."""
+        neutral = self.pusher_home[:3, :3] if neutral is None else neutral
         if self.turns is None:
             return neutral[None], np.zeros(1, int)
         scene = self.surface.scene if occluders is not None else None
@@ -957,32 +967,91 @@ class PlanExecutor:
         return Command()
 
     def _look_around(self, obs: Observation) -> Command:
-        """Turn the pusher where it stands through its best views of the object's last seen pose (it
-        is held: it has not moved since), each for `stale_after`, until the camera finds it; after
-        the last, go back to where the run started, where the camera saw it first."""
+        """Look for the held object (it has not moved since it was last seen): turn the pusher where
+        it stands through its views that see a tag, each for `stale_after`; then go to the vantage
+        places round the grasp axis the most tags are seen from (`_vantage_places`), up to
+        LOOK_PLACES, and do the same at each. Seen from none, the run ends OBJECT_LOST with the grip
+        closed. The search is bounded by its places and views (each given up when the arm stops
+        turning towards it), not by how long the object goes unseen; the step's time limit counts
+        afresh at each view and each place (it catches a look that makes no headway)."""
+        occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         if self.looking is None:
             place = obs.pusher[:3, 3].copy()
-            views, seen = self._views(obs, place, occluders=Occluders.of(self.shape, obs.holder, obs.opening))
-            self.looking = _Look(place, [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0]))
+            self.looking = _Look(place, self._look_views(obs, place, self.pusher_home[:3, :3], occluders))
         look = self.looking
-        if look.homeward:
+        self.unseen_from = obs.time
+        if look.travelling:
             if self._arrived(obs) and self.waypoint < len(self.push.waypoints) - 1:
                 self.waypoint += 1
-            return self._along_route(obs)
+            elif self._arrived(obs) or self._stalled(obs):     # (an arm at a limit: looks from where it got to)
+                look.travelling, look.place = False, obs.pusher[:3, 3].copy()
+                look.views = self._look_views(obs, look.place, self.push.orientations[-1], occluders)
+            if look.travelling:
+                return self._along_route(obs)
+        if not look.views:
+            return self._next_look_place(obs)
         command = self._go_to(obs, look.place, look.views[0])
-        if Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude() < WAYPOINT_TURN_TOLERANCE:
+        if (Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude() < WAYPOINT_TURN_TOLERANCE
+                or self._stalled(obs, look.place, look.views[0])):     # (as far as the arm turns)
             if look.since is None:
                 look.since = obs.time
             elif obs.time - look.since > self.settings.stale_after:
                 look.views.pop(0)
-                look.since = None
-                if not look.views:
-                    try:
-                        self._head_home(obs)
-                        look.homeward = True
-                    except RouteError:
-                        look.views.append(obs.pusher[:3, :3].copy())   # nowhere to go: wait here
+                look.since, self.step_started = None, obs.time
         return command
+
+    def _look_views(self, obs: Observation, place: np.ndarray, neutral: np.ndarray,
+                    occluders: Occluders) -> list[np.ndarray]:
+        """The best pusher orientation at `place` (turned from `neutral`) and the distinct others a tag is
+        seen from, best first (the best is tried even if the model sees no tag from it)."""
+        views, seen = self._views(obs, place, occluders=occluders, neutral=neutral)
+        return [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0])
+
+    def _next_look_place(self, obs: Observation) -> Command:
+        """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST."""
+        look = self.looking
+        if look.places is None:
+            look.places = self._vantage_places(obs)
+        while look.places and look.gone_to < LOOK_PLACES:
+            place, orientation = look.places.pop(0)
+            try:
+                self._route_to(obs, apply(invert(obs.holder), place), orientation)
+            except RouteError:
+                continue
+            look.gone_to += 1
+            look.travelling, look.place, look.since = True, place, None
+            self.step_started = obs.time
+            return self._along_route(obs)
+        return self._abort(Outcome.OBJECT_LOST, f"object pose lost (last seen {obs.time - obs.object_time:.1f} s ago): "
+                           f"not seen from where the pusher stood nor from {look.gone_to} vantage place(s) round "
+                           f"it, during {self.step.name} of primitive {self.index}: stopped, gripper 1 closed at "
+                           "the hold force")
+
+    def _vantage_places(self, obs: Observation) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Where the pusher started, turned LOOK_TURNS round the holder's grasp axis (its x, through the
+        grasp's middle: what a rotation turns the object about) with the pusher's orientation turned
+        alike, each moved just clear of the space kept free if inside it (as the object turned in the
+        grip, that space grew): those within the workspace's limits that the view model sees a tag
+        from, with their best view, most tags first, then nearest; where it started (the camera saw
+        the object from there first) always, last if the model sees no tag from there."""
+        s = self.settings
+        box = self._keep_out(obs)
+        occluders = Occluders.of(self.shape, obs.holder, obs.opening)
+        home, axes = self._home_in(obs.holder), obs.holder[:3, :3]
+        found = []
+        for angle in LOOK_TURNS:
+            turn = Rotation.from_rotvec([angle, 0.0, 0.0]).as_matrix()
+            place = apply(obs.holder, box.nearest_outside(turn @ home))
+            away = float(np.linalg.norm(place - obs.pusher[:3, 3]))
+            if (min([away] + [float(np.linalg.norm(place - other[2])) for other in found]) < SAME_PLACE
+                    or np.any(place < s.workspace_min) or np.any(place > s.workspace_max)):
+                continue
+            views, seen = self._views(obs, place, occluders=occluders,
+                                      neutral=axes @ turn @ axes.T @ self.pusher_home[:3, :3])
+            if seen[0] > 0 or angle == 0.0:
+                found.append((-int(seen[0]), away, place, views[0]))
+        found.sort(key=lambda item: item[:2])
+        return [(place, view) for _, _, place, view in found]
 
     def _look_again(self, obs: Observation) -> Command | None:
         """Wait at the push start for a fresh pose; when none comes within `stale_after`, turn the
@@ -1165,17 +1234,23 @@ class PlanExecutor:
         """Route the pusher back to where it started (RouteError if there is none); before the holder
         turns the object, at least out of the turning object's reach (with gripper 1 moving in the
         pushes, at alpha < 1, the start may have come within it)."""
-        box = self._keep_out(obs)
-        to_holder = invert(obs.holder)
-        local = [apply(to_holder, p) for p in (obs.pusher[:3, 3], self.pusher_home[:3, 3])]
+        goal = self._home_in(obs.holder)
         if clear_of_turn:
-            radius, needed = float(np.hypot(*local[1][:2])), self._turn_radius(obs) + self.settings.clearance
+            radius, needed = float(np.hypot(*goal[:2])), self._turn_radius(obs) + self.settings.clearance
             if radius < needed:
-                outward = local[1][:2] if radius > 1e-6 else local[0][:2]
-                local[1][:2] = outward / np.linalg.norm(outward) * needed
-        local[1] = box.nearest_outside(local[1])   # a run that began next to the object ends just clear of it
-        places = [apply(obs.holder, w) for w in route(local[0], local[1], box, local[1])]
-        orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [self.pusher_home[:3, :3]]
+                outward = goal[:2] if radius > 1e-6 else apply(invert(obs.holder), obs.pusher[:3, 3])[:2]
+                goal[:2] = outward / np.linalg.norm(outward) * needed
+        self._route_to(obs, goal, self.pusher_home[:3, :3])
+
+    def _route_to(self, obs: Observation, goal: np.ndarray, orientation: np.ndarray) -> None:
+        """Route the pusher to `goal` (holder frame; a goal inside the space kept free moves just clear
+        of it: a run that began next to the object ends there), turned to `orientation` there and
+        its camera on the object on the way (RouteError if there is no route)."""
+        box = self._keep_out(obs)
+        start = apply(invert(obs.holder), obs.pusher[:3, 3])
+        goal = box.nearest_outside(goal)
+        places = [apply(obs.holder, w) for w in route(start, goal, box, goal)]
+        orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [orientation]
         self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
         self.waypoint = 0
 
@@ -1213,10 +1288,10 @@ class PlanExecutor:
         return self._along_route(obs)
 
     # --- motion helpers
-    def _stalled(self, obs: Observation, target: np.ndarray | None = None) -> bool:
-        """Has the pusher come no closer to `target` (by default the current waypoint, turned as wanted
-        there) for `stall_time`?"""
-        orientation = None
+    def _stalled(self, obs: Observation, target: np.ndarray | None = None,
+                 orientation: np.ndarray | None = None) -> bool:
+        """Has the pusher come no closer to `target` (turned to `orientation`, if given; by default the
+        current waypoint, turned as wanted there) for `stall_time`?"""
         if target is None:
             target, orientation = self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint]
         offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))

@@ -292,6 +292,28 @@ def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
         assert seen(scene=ObjectSurface(vertices, np.asarray(block.triangles)).scene) == expected
 
 
+def test_a_tag_too_small_in_the_image_to_be_detected_is_not_counted():
+    """A tag counts only if its black square's shortest side spans SMALLEST_SIDE pixels (cv2.aruco
+    missed most below it on the wrist camera's renders): too far away, or seen too obliquely."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.views import SMALLEST_SIDE, CameraModel, TagLayout, view_score
+
+    half, focal = 0.012, 400.0         # a 24 mm tag facing -z; at 20 cm it spans 48 px
+    tags = TagLayout(np.array([[[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]]]),
+                     np.array([[0.0, 0.0, -1.0]]))
+    camera = CameraModel(np.array([[focal, 0, 319.5], [0, focal, 239.5], [0, 0, 1]]), 640, 480, np.eye(4))
+
+    def seen(distance: float, turned_deg: float = 0.0) -> int:
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_euler("y", turned_deg, degrees=True).as_matrix()
+        return int(view_score(camera, tags, pose, np.array([0.0, 0.0, -distance]), np.eye(3)[None])[0][0])
+
+    far = 2 * half * focal / (SMALLEST_SIDE - 3.0)        # the tag 3 px short of the limit
+    assert seen(0.2) == 1 and seen(far * 0.85) == 1 and seen(far) == 0
+    assert seen(0.2, 45.0) == 1 and seen(0.2, 64.0) == 0     # edge-on at 64 deg: 21 px across
+
+
 # --- the whole loop in one process: real MuJoCo, real rendering and tag detection --------------
 @pytest.fixture(scope="module")
 def loop_parts():
@@ -532,6 +554,38 @@ def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_
     assert outcome.outcome == Outcome.OK, outcome.message
     assert "dead reckoning" in outcome.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
+def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it(loop_parts, box_surface):
+    """The camera sees nothing (a lens cap) from mid-push until the pusher, its views where it stands
+    tried, heads for a vantage place round the grasp axis: seen again, the run goes on to OK. Never
+    seen again, the run ends OBJECT_LOST after the vantage places, the grip closed at the hold force."""
+    from dmg_executor.controller import LOOK_PLACES, Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    for comes_back in (True, False):
+        executor = _translation_executor(loop_parts, box_surface)
+        tick = _half_a_second_into_the_push(loop, executor)
+        ends = cell.time + 120
+        while not executor.done and cell.time < ends and not (
+                comes_back and executor.looking is not None and executor.looking.travelling):
+            tick(perceive=False)
+        if comes_back:
+            assert not executor.done, executor.result
+            assert executor.looking.gone_to == 1 and executor.step.name == "FIND_CONTACT"
+            outcome = loop.run(executor, time_limit=120)
+            assert outcome.outcome == Outcome.OK, outcome.message
+            assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+        else:
+            assert executor.done, "still looking after 120 s"
+            outcome = executor.result
+            assert outcome.outcome == Outcome.OBJECT_LOST, outcome.message
+            assert "vantage place" in outcome.message and "gripper 1 closed" in outcome.message, outcome.message
+            assert 1 <= executor.looking.gone_to <= LOOK_PLACES
+            loop.apply(executor.update(loop.observe()))
+            cell.run(0.5)
+            assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
 def test_a_blind_push_is_judged_short_only_by_a_pose_certain_of_its_position(loop_parts, box_surface):
@@ -782,7 +836,8 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_sid
         cell.run(loop.control_period)
     assert stuck_from is not None and executor.done
     outcome = executor.result
-    assert outcome.outcome == Outcome.OUT_OF_TOLERANCE, outcome.message
+    # The far-side push is left; the run ends on what the other pushes reach, within the goal's tolerance or not.
+    assert outcome.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), outcome.message
     assert "could not turn the object (stopped at" in outcome.message and "into the holding gripper" in outcome.message
     assert outcome.message.count("turned the object -180 deg") == 1          # tried once
     holder_after = cell.grasp_pose("arm1")                                    # turned back, held
@@ -1273,7 +1328,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
 
     def largest_tilt(tilt_gain: float) -> float:
-        cell.reset("plug", object_in_gripper=invert(start))
+        cell.reset("plug", object_in_gripper=invert(start), restart_clock=True)   # as run alone, whatever ran before
         loop.watch(0.5)
         planned = plan(graph, pose(invert(loop.seen)), pose(goal))
         assert [p.kind.name for p in planned.primitives][:1] == ["TRANSLATION"], planned.message
