@@ -968,16 +968,15 @@ class PlanExecutor:
 
     def _look_around(self, obs: Observation) -> Command:
         """Look for the held object (it has not moved since it was last seen): turn the pusher where
-        it stands through its views that see a tag, each for `stale_after`; then go to the vantage
-        places round the grasp axis the most tags are seen from (`_vantage_places`), up to
-        LOOK_PLACES, and do the same at each. Seen from none, the run ends OBJECT_LOST with the grip
-        closed. The search is bounded by its places and views (each given up when the arm stops
+        it stands through its best view and the others that see a tag, each for `stale_after`; then
+        go to the vantage places round the grasp axis the most tags are seen from
+        (`_vantage_places`), up to LOOK_PLACES, and do the same at each. Seen from none, the run
+        ends OBJECT_LOST with the grip closed. The search is bounded by its places and views (each given up when the arm stops
         turning towards it), not by how long the object goes unseen; the step's time limit counts
         afresh at each view and each place (it catches a look that makes no headway)."""
-        occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         if self.looking is None:
             place = obs.pusher[:3, 3].copy()
-            self.looking = _Look(place, self._look_views(obs, place, self.pusher_home[:3, :3], occluders))
+            self.looking = _Look(place, self._look_views(obs, place, self.pusher_home[:3, :3]))
         look = self.looking
         self.unseen_from = obs.time
         if look.travelling:
@@ -985,7 +984,7 @@ class PlanExecutor:
                 self.waypoint += 1
             elif self._arrived(obs) or self._stalled(obs):     # (an arm at a limit: looks from where it got to)
                 look.travelling, look.place = False, obs.pusher[:3, 3].copy()
-                look.views = self._look_views(obs, look.place, self.push.orientations[-1], occluders)
+                look.views = self._look_views(obs, look.place, self.push.orientations[-1])
             if look.travelling:
                 return self._along_route(obs)
         if not look.views:
@@ -1000,11 +999,11 @@ class PlanExecutor:
                 look.since, self.step_started = None, obs.time
         return command
 
-    def _look_views(self, obs: Observation, place: np.ndarray, neutral: np.ndarray,
-                    occluders: Occluders) -> list[np.ndarray]:
+    def _look_views(self, obs: Observation, place: np.ndarray, neutral: np.ndarray) -> list[np.ndarray]:
         """The best pusher orientation at `place` (turned from `neutral`) and the distinct others a tag is
         seen from, best first (the best is tried even if the model sees no tag from it)."""
-        views, seen = self._views(obs, place, occluders=occluders, neutral=neutral)
+        views, seen = self._views(obs, place, occluders=Occluders.of(self.shape, obs.holder, obs.opening),
+                                  neutral=neutral)
         return [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0])
 
     def _next_look_place(self, obs: Observation) -> Command:
@@ -1038,18 +1037,19 @@ class PlanExecutor:
         box = self._keep_out(obs)
         occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         home, axes = self._home_in(obs.holder), obs.holder[:3, :3]
-        found = []
+        found, taken = [], [obs.pusher[:3, 3]]     # (places this close to one taken are that one)
         for angle in LOOK_TURNS:
             turn = Rotation.from_rotvec([angle, 0.0, 0.0]).as_matrix()
             place = apply(obs.holder, box.nearest_outside(turn @ home))
-            away = float(np.linalg.norm(place - obs.pusher[:3, 3]))
-            if (min([away] + [float(np.linalg.norm(place - other[2])) for other in found]) < SAME_PLACE
+            if (np.linalg.norm(np.array(taken) - place, axis=1).min() < SAME_PLACE
                     or np.any(place < s.workspace_min) or np.any(place > s.workspace_max)):
                 continue
+            away = float(np.linalg.norm(place - obs.pusher[:3, 3]))
             views, seen = self._views(obs, place, occluders=occluders,
                                       neutral=axes @ turn @ axes.T @ self.pusher_home[:3, :3])
             if seen[0] > 0 or angle == 0.0:
                 found.append((-int(seen[0]), away, place, views[0]))
+                taken.append(place)
         found.sort(key=lambda item: item[:2])
         return [(place, view) for _, _, place, view in found]
 

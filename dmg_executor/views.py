@@ -6,8 +6,9 @@ free within the arm's comfortable range. For each place the pusher goes, every o
 on a grid - tilts of the finger axis up to `tilt_limit`, rolls about it up to `roll_limit`,
 from the orientation the pusher started in - is scored by projecting the object's tags
 into the camera: most tags wholly in the image, facing the camera, large enough there to be
-detected and hidden by nothing wins, ties go to tags nearer the image centre, then to the smaller turn. Rolling matters:
-it swings the camera's offset round the fingers, towards the side the tags are on.
+detected and hidden by nothing wins, ties go to tags nearer the image centre, then to the
+smaller turn. Rolling matters: it swings the camera's offset round the fingers, towards the
+side the tags are on.
 
 What can hide a tag: the object itself (rays cast on its mesh), the holding gripper's
 fingers and hand, and the pusher's own fingertips, which sit in front of its camera (a
@@ -29,9 +30,9 @@ from dmg_planner.objects import ObjectModel
 GRID_STEP = np.deg2rad(7.5)
 EDGE_MARGIN = 30.0                   # px a tag corner must keep from the image border (the pose is only planned)
 FACING_COSINE = np.cos(np.deg2rad(70.0))   # a tag seen more edge-on than this is not counted
-# A tag whose black square's shortest side projects shorter than this [px] is not counted: cv2.aruco
-# found 0-69 % of tags at 17-22 px and every one of 1533 at 23 px or more (wrist-camera frames of
-# three eval runs, the view model's other tests passed; 3 px per cell of the 8 across).
+# A tag whose black square's shortest side projects shorter than this [px] is not counted: of the
+# tags this model counted on the wrist-camera frames of three eval runs, cv2.aruco found 0-69 % at
+# 17-22 px and every one of 1533 at 23 px or more (3 px per cell of the 8 across).
 SMALLEST_SIDE = 24.0
 LEVEL_SINE = np.sin(np.deg2rad(15.0))   # fingertip axis across a push line: at most this far off
 IN_LINE_COSINE = np.cos(np.deg2rad(30.0))   # fingertips one behind the other along a push: at most this far off
