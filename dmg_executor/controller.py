@@ -33,7 +33,8 @@ from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists
 from dmg_executor.grip import tilt_hold_force
-from dmg_executor.push_points import ObjectSurface, PushError, PushPoint, exit_normals, rotation_push, translation_push
+from dmg_executor.push_points import (SLANT_LIMIT_DEG, ObjectSurface, PushError, PushPoint, exit_normals, rotation_push,
+                                      translation_push)
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
@@ -44,6 +45,8 @@ from dmg_planner.transforms import apply, distance, from_rotation, invert
 MAX_PUSHES_PER_PRIMITIVE = 4
 MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
 RETRY_FACTOR = 2.0    # another push when the remaining error exceeds this many tolerances
+NO_HEADWAY = 0.5      # a push that brought its primitive's error down by less than this many tolerances made none
+SETTLED_SHARE = 0.8   # ... and with the grasp within this share of the goal's tolerances, no push like it follows
 WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
 EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
@@ -250,19 +253,41 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
 
 
-def leading_tip(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
-    """Where [m, across `direction`] the closed pusher's fingertip that meets the face first sits from
-    its grasp frame (turned `orientation`), when one tip is clearly ahead along `direction` (tips one
-    behind the other: LEADING_TIP); zero for tips side by side, where which one touches first is down
-    to the arm's tracking. A push starts moved back by it, so that tip meets the face on the push line:
-    a contact off the line turns the sliding object (sim, bracket: a tip 1.8 mm off along the grasp
-    axis, 2.3 deg of tilt over an 8 mm blind push; box: a tip 6.6 mm off across it, 26 deg about the
-    grasp axis over a 3 mm push)."""
-    ahead = float(direction @ orientation[:, 0])
+def _tip_ahead(facing: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """The closed pusher's fingertip centre [m, from its grasp frame turned `orientation`] that is
+    clearly ahead along `facing` (tips one behind the other: LEADING_TIP); zero for tips side by
+    side, where which one touches first is down to the arm's tracking."""
+    ahead = float(facing @ orientation[:, 0])
     if abs(ahead) < LEADING_TIP:
         return np.zeros(3)
-    tip = math.copysign(tip_radius, ahead) * orientation[:, 0]
+    return math.copysign(tip_radius, ahead) * orientation[:, 0]
+
+
+def leading_tip(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """Where [m, across `direction`] the closed pusher's fingertip that meets a face square to the push
+    first sits from its grasp frame (turned `orientation`): the tip ahead along `direction`, or zero
+    (_tip_ahead). A contact off the push line turns the sliding object (sim, bracket: a tip 1.8 mm
+    off along the grasp axis, 2.3 deg of tilt over an 8 mm blind push; box: a tip 6.6 mm off across
+    it, 26 deg about the grasp axis over a 3 mm push)."""
+    tip = _tip_ahead(direction, orientation, tip_radius)
     return tip - (tip @ direction) * direction
+
+
+def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, orientation: np.ndarray,
+               tip_radius: float, gap: float) -> np.ndarray:
+    """Where the pusher's grasp frame (turned `orientation`) starts a push along `direction` on `point`
+    of a face with outward `normal`: the fingertip nearer the face, when clearly so (_tip_ahead), on
+    the line along `direction` on which it meets the face at `point`, and neither tip nearer than
+    `gap` along that line to the face's plane. Set back from the push line alone, tips side by side
+    on a face slanted to the push are not equally far from it (sim, box face slanted 41 deg: the
+    other tip started 3 mm inside it, pressed 21 N into it against the closed grip, and the box
+    jumped 2.3 mm / 2.1 deg the wrong way when the grip loosened)."""
+    met = point + tip_radius * normal - _tip_ahead(-normal, orientation, tip_radius)   # that tip touching `point`
+    tips = met + tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
+    # How far each tip travels along `direction` before it touches the face's plane.
+    slant = max(-float(direction @ normal), np.cos(np.deg2rad(SLANT_LIMIT_DEG)))
+    travel = ((tips - point) @ normal - tip_radius) / slant
+    return met - (gap - min(float(travel.min()), 0.0)) * direction
 
 
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
@@ -327,6 +352,9 @@ class PlanExecutor:
         self.phase = ""
         self.reference_pending = False
         self.looking: _Look | None = None
+        self.searching = False          # the held object went unseen on the way to a push: look for it
+        self.error_before_push = math.inf   # the current primitive's error when its last push was planned
+        self.settled = False            # near the goal, and pushes make no headway: no more of them
         self.headway: _Headway | None = None
         self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
         self.slip_pose_time = -math.inf
@@ -389,14 +417,24 @@ class PlanExecutor:
                                f"grasp is {self.narrowest_grasp * 1000:.1f} mm); stopped")
         # While the grip is closed and nothing pushes, the object cannot move: the camera may lose it
         # for a while (the pusher's hand turns and passes the object); the run ends only when the
-        # held object stays unseen. A push goes on by dead reckoning (or, without blind pushes, stops
-        # at once with the grip closed) and counts as seen until it ends; on the way to a push that
-        # starts where the camera sees no tag (and loosening there), and while the holder turns the object
-        # or has turned it away, the object is not expected to be seen: the count starts after.
+        # held object stays unseen (on the way to a push: and is not found from vantage places). A
+        # push goes on by dead reckoning (or, without blind pushes, stops at once with the grip
+        # closed) and counts as seen until it ends; on the way to a push that starts where the camera
+        # sees no tag (and loosening there), and while the holder turns the object or has turned it
+        # away, the object is not expected to be seen: the count starts after.
         blind_push = self.step in (Step.APPROACH, Step.EXECUTE) and self.push is not None and self.push.blind
-        if blind_push or self.holder_turn is not None or self.far_side:
-            self.unseen_from = obs.time
+        if blind_push or self.holder_turn is not None or self.far_side or self.searching:
+            self.unseen_from = obs.time     # (a search is bounded by its vantage places)
         unseen = obs.time - max(obs.object_time, self.reckoned_time, self.unseen_from)
+        if obs.object_in_holder is not None and unseen > s.stale_after_held and self.step == Step.APPROACH:
+            # On the way to a push (or back from one given up) the held object has not moved: look for it
+            # from vantage places round it, as after a push, before giving it up (sim: a box turned
+            # 131 deg, the pusher stuck at a waypoint behind it, OBJECT_LOST on its way home).
+            self.notes.append(f"the object went unseen for {unseen:.1f} s on the way to a push of primitive "
+                              f"{self.index}: looked for it")
+            self.searching = True
+            self._enter(Step.FIND_CONTACT, obs)
+            return Command()
         if obs.object_in_holder is None or unseen > s.stale_after_held:
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
             return self._abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
@@ -406,6 +444,7 @@ class PlanExecutor:
         # 7-10 mm off); the held pose is known.
         trusted = self.holder_turn is None and (not self.far_side or self._certain(obs))
         fresh = trusted and obs.time - obs.object_time <= s.stale_after
+        self.searching = self.searching and not fresh
         if self._pushing() and s.blind_pushes:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
             # up for, and the push goes on when the camera loses the object.
@@ -513,10 +552,10 @@ class PlanExecutor:
             return self._turn_holder(obs)
         if self.far_side_pushed:
             return self._start_holder_turn(obs, back=True)     # to see what the push did
-        if self.reference_pending and not self.far_side:
-            return self._look_around(obs)     # a push was stopped unseen: plan the next one from a fresh pose
+        if (self.reference_pending or self.searching) and not self.far_side:
+            return self._look_around(obs)     # plan the next push from a fresh pose
         self.looking = None
-        while self.index < len(self.primitives) and self._primitive_finished():
+        while self.index < len(self.primitives) and self._primitive_finished(obs):
             self.index, self.pushes = self.index + 1, 0
             if self.index == len(self.primitives):
                 self._add_correction(obs)
@@ -526,6 +565,7 @@ class PlanExecutor:
         primitive = self.primitives[self.index]
         try:
             self.push = self._plan_push(primitive, obs)
+            self.error_before_push = self._error_and_tolerance()[0]
         except (PushError, RouteError) as error:
             if self._push_when_returned(primitive, obs):
                 return self._start_holder_turn(obs, back=False, home=self.holder_start)
@@ -704,19 +744,39 @@ class PlanExecutor:
                   PrimitiveKind.ROTATION: abs(self.errors[1]) / s.angle_tolerance}
         shares.pop(failed, None)
         kind = max(shares, key=shares.get)
-        if shares[kind] <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
+        if self.settled or shares[kind] <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
             return
         self.primitives.append(replace(self.primitives[-1], kind=kind))
 
-    def _primitive_finished(self) -> bool:
-        """Within tolerance, or close enough after a push, or out of pushes."""
-        primitive = self.primitives[self.index]
-        position_error, angle_error = self.errors
-        error, tolerance = ((position_error, self.settings.position_tolerance)
-                            if primitive.kind == PrimitiveKind.TRANSLATION
-                            else (abs(angle_error), self.settings.angle_tolerance))
+    def _primitive_finished(self, obs: Observation) -> bool:
+        """Within tolerance, or close enough after a push, or out of pushes, or settled near the goal."""
+        error, tolerance = self._error_and_tolerance()
         return (error <= tolerance or (self.pushes > 0 and error <= RETRY_FACTOR * tolerance)
-                or self.pushes >= MAX_PUSHES_PER_PRIMITIVE)
+                or self.pushes >= MAX_PUSHES_PER_PRIMITIVE or self._settled(obs, error, tolerance))
+
+    def _error_and_tolerance(self) -> tuple[float, float]:
+        """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation)."""
+        if self.primitives[self.index].kind == PrimitiveKind.TRANSLATION:
+            return self.errors[0], self.settings.position_tolerance
+        return abs(self.errors[1]), self.settings.angle_tolerance
+
+    def _settled(self, obs: Observation, error: float, tolerance: float) -> bool:
+        """Did the last push of a primitive that ends at the goal grasp make no headway (NO_HEADWAY),
+        with the grasp already within SETTLED_SHARE of the goal's tolerances? Then more pushes like it
+        would spend the time, not improve the grasp (sim, box: eight 13 s translation pushes from
+        1.9-2.8 mm off moved it 0.0-0.6 mm each, until the run's time was nearly up); no correction
+        follows."""
+        headway = self.error_before_push - error
+        if self.pushes == 0 or self.index < self.plan_length - 1 or headway >= NO_HEADWAY * tolerance:
+            return False
+        s = self.settings
+        position, angle = self.final_errors(obs)
+        self.settled = (position <= SETTLED_SHARE * s.goal_position_tolerance
+                        and angle <= SETTLED_SHARE * s.goal_angle_tolerance)
+        if self.settled:
+            self.notes.append(f"primitive {self.index} settled {position * 1000:.1f} mm and {np.rad2deg(angle):.1f} deg "
+                              f"from the goal: its last push made no headway")
+        return self.settled
 
     def _plan_push(self, primitive: Primitive, obs: Observation) -> _Push:
         """The push for what remains of `primitive`: the best-seen of the possible push points,
@@ -872,16 +932,16 @@ class PlanExecutor:
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first).
+        normal = object_pose[:3, :3] @ push.normal
         for first, view in enumerate(views):
-            touching = point - (self._reach(direction, view) + s.gap) * direction   # the leading tip, if any
-            start = touching - leading_tip(direction, view, s.tip_radius)
+            start = push_start(point, normal, direction, view, s.tip_radius, s.gap)
             if not self._hands_clash(start, view, occluders):
                 break
         else:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              "would put the pusher's hand into the holding gripper however it is turned")
         views, seen = views[first:], seen[first:]
-        lever = float(np.linalg.norm(np.cross(touching - holder[:3, 3], holder[:3, 0])))
+        lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
                      _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])

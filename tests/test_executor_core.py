@@ -179,6 +179,47 @@ def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_
     assert 50 < ahead_count < 350   # both cases were exercised
 
 
+def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push():
+    """Set back along the push line alone, tips side by side on a face slanted to the push are not
+    equally far from it: one would start inside it. Each starts at least `gap` (along the push)
+    from the face's plane, the nearer one exactly that; one clearly nearer meets it at the push point."""
+    from dmg_executor.controller import LEADING_TIP, push_start
+
+    radius, gap, point = 0.008, 0.006, np.array([0.01, 0.02, 0.03])
+    random = np.random.default_rng(5)
+    cases = {"ahead": 0, "side by side": 0}
+    for orientation in Rotation.random(300, random_state=4).as_matrix():
+        direction = random.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        # A face slanted up to 55 deg from square to the push (push points allow 60).
+        axis = np.cross(direction, random.normal(size=3))
+        slant = Rotation.from_rotvec(np.deg2rad(random.uniform(0.0, 55.0)) * axis / np.linalg.norm(axis))
+        normal = -(slant.as_matrix() @ direction)
+        start = push_start(point, normal, direction, orientation, radius, gap)
+        tips = start + radius * np.outer([1.0, -1.0], orientation[:, 0])
+        travel = ((tips - point) @ normal - radius) / -(direction @ normal)   # along the push to the plane
+        assert travel.min() == pytest.approx(gap, abs=1e-9), travel
+        nearer = -(normal @ orientation[:, 0])
+        if abs(nearer) >= LEADING_TIP:
+            cases["ahead"] += 1
+            tip = tips[0 if nearer > 0 else 1]
+            # That tip's sphere, moved on by `gap`, touches the face at the push point.
+            assert np.allclose(tip + gap * direction, point + radius * normal, atol=1e-9)
+        else:
+            cases["side by side"] += 1
+    assert min(cases.values()) > 50, cases
+    # The box of stop 31 (eval pair 2): the face slanted 41 deg, tips side by side across the push
+    # along the slant. Set back from the push line by the tip's reach and the gap, one tip started
+    # 2.8 mm inside the face; now both are out of it.
+    direction, across = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    normal = Rotation.from_rotvec(np.deg2rad(41.0) * np.array([1.0, 0.0, 0.0])).as_matrix() @ -direction
+    orientation = np.column_stack([across, -direction, np.cross(across, -direction)])
+    old = point - (radius + gap) * direction
+    for start, outside in ((old, False), (push_start(point, normal, direction, orientation, radius, gap), True)):
+        tips = start + radius * np.outer([1.0, -1.0], across)
+        assert bool(((tips - point) @ normal).min() > radius) is outside
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
@@ -586,6 +627,69 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
             loop.apply(executor.update(loop.observe()))
             cell.run(0.5)
             assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_held_object_lost_from_view_on_the_way_to_a_push_is_looked_for_not_given_up(loop_parts, box_surface):
+    """The camera sees nothing from just after the pusher sets off for its first push: once the held
+    object has gone unseen for `stale_after_held`, the push is put off and the object looked for;
+    seen again, the run goes on to OK."""
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, stale_after_held=3.0)
+    tick = lambda perceive=True: (perceive and loop.perceive(), loop.apply(executor.update(loop.observe())),   # noqa: E731
+                                  cell.run(loop.control_period))
+    while executor.step.name != "APPROACH" and not executor.done:
+        tick()
+    capped = cell.time
+    while executor.looking is None and not executor.done and cell.time < capped + 20.0:
+        tick(perceive=False)
+    assert not executor.done, executor.result
+    assert executor.step.name == "FIND_CONTACT" and cell.time - capped >= 3.0, (executor.step, cell.time - capped)
+    assert any("unseen" in note and "looked for it" in note for note in executor.notes), executor.notes
+    outcome = loop.run(executor, time_limit=120)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+
+
+def _pushed_once(loop_parts, box_surface, length: float, headway: float, **overrides):
+    """The box `length` along its fingers from its goal, its one translation in the state a push
+    leaves it (pushed once, its error down by `headway` since that push was planned); run until the
+    executor ends or plans its next push. Returns the executor and the primitive's error it saw first."""
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, length=length, **overrides)
+    loop.watch(0.5)
+    executor._measure(loop.observe())
+    seen = executor.errors[0]
+    executor.pushes, executor.error_before_push = 1, seen + headway
+    ends = cell.time + 30.0
+    while not executor.done and executor.step.name != "APPROACH" and cell.time < ends:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+    return executor, seen
+
+
+@pytest.mark.parametrize("headway, goal_tolerance, settles", [(0.0001, 0.003, True), (0.001, 0.003, False),
+                                                               (0.0001, 0.002, False)])
+def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, box_surface, headway, goal_tolerance,
+                                                                   settles):
+    """The box 2 mm from its goal, its one translation pushed once: a push that brought the error
+    down by less than NO_HEADWAY tolerances (0.25 mm here), with the grasp within SETTLED_SHARE of
+    the goal's tolerance, is the last - the run ends OK from where it is. With headway, or outside
+    that share, the primitive is pushed again."""
+    from dmg_executor.controller import SETTLED_SHARE, Outcome
+
+    executor, seen = _pushed_once(loop_parts, box_surface, 0.002, headway, position_tolerance=0.0005,
+                                     goal_position_tolerance=goal_tolerance)
+    assert 0.0015 < seen < SETTLED_SHARE * 0.003, seen      # near the goal, not within twice position_tolerance
+    settled = [note for note in executor.notes if "settled" in note]
+    if settles:
+        assert executor.done and executor.result.outcome == Outcome.OK, executor.result
+        assert settled and len(executor.primitives) == executor.plan_length, (executor.notes, executor.primitives)
+    else:
+        assert not executor.done and executor.step.name == "APPROACH" and not settled, (executor.step, executor.notes)
 
 
 def test_a_blind_push_is_judged_short_only_by_a_pose_certain_of_its_position(loop_parts, box_surface):
