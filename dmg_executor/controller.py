@@ -70,6 +70,9 @@ HOLDER_MOVED = (0.01, np.deg2rad(10.0))   # m, rad: gripper 1 this far from wher
 # the grasp axis (the way a rotation turns the object, and with it the faces its tags are on).
 LOOK_TURNS = np.deg2rad([0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
 LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands) before the object counts as lost
+# A view the arm stopped this far short of (its wrist at a limit): at that place, views further from
+# where it got to are not tried (sim, bracket: five views 71-89 deg beyond reach, 4 s each, none seen).
+VIEW_SHORT = np.deg2rad(20.0)
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 
 
@@ -1030,10 +1033,12 @@ class PlanExecutor:
         """Look for the held object (it has not moved since it was last seen): turn the pusher where
         it stands through its best view and the others that see a tag, each for `stale_after`; then
         go to the vantage places round the grasp axis the most tags are seen from
-        (`_vantage_places`), up to LOOK_PLACES, and do the same at each. Seen from none, the run
-        ends OBJECT_LOST with the grip closed. The search is bounded by its places and views (each given up when the arm stops
-        turning towards it), not by how long the object goes unseen; the step's time limit counts
-        afresh at each view and each place (it catches a look that makes no headway)."""
+        (`_vantage_places`), up to LOOK_PLACES, and do the same at each. A view the arm stops more
+        than VIEW_SHORT short of drops the place's views further than that from where it got to.
+        Seen from none, the run ends OBJECT_LOST with the grip closed. The search is bounded by its
+        places and views (each given up when the arm stops turning towards it), not by how long the
+        object goes unseen; the step's time limit counts afresh at each view and each place (it
+        catches a look that makes no headway)."""
         if self.looking is None:
             place = obs.pusher[:3, 3].copy()
             self.looking = _Look(place, self._look_views(obs, place, self.pusher_home[:3, :3]))
@@ -1050,13 +1055,17 @@ class PlanExecutor:
         if not look.views:
             return self._next_look_place(obs)
         command = self._go_to(obs, look.place, look.views[0])
-        if (Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude() < WAYPOINT_TURN_TOLERANCE
-                or self._stalled(obs, look.place, look.views[0])):     # (as far as the arm turns)
+        short = Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude()
+        if short < WAYPOINT_TURN_TOLERANCE or self._stalled(obs, look.place, look.views[0]):   # (as far as the arm turns)
             if look.since is None:
                 look.since = obs.time
             elif obs.time - look.since > self.settings.stale_after:
                 look.views.pop(0)
                 look.since, self.step_started = None, obs.time
+                if short > VIEW_SHORT:
+                    # The wrist is at a limit here: only views near where it got to are tried.
+                    look.views = [view for view in look.views
+                                  if Rotation.from_matrix(view @ obs.pusher[:3, :3].T).magnitude() <= VIEW_SHORT]
         return command
 
     def _look_views(self, obs: Observation, place: np.ndarray, neutral: np.ndarray) -> list[np.ndarray]:
