@@ -73,6 +73,8 @@ LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands)
 # A view the arm stopped this far short of (its wrist at a limit): at that place, views further from
 # where it got to are not tried (sim, bracket: five views 71-89 deg beyond reach, 4 s each, none seen).
 VIEW_SHORT = np.deg2rad(20.0)
+TIP_RIMS = np.deg2rad([0.0, 30.0, 60.0, 80.0])   # fingertip sphere points off the push direction ...
+TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, that may meet the object first
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 
 
@@ -291,6 +293,33 @@ def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, ori
     slant = max(-float(direction @ normal), np.cos(np.deg2rad(SLANT_LIMIT_DEG)))
     travel = ((tips - point) @ normal - tip_radius) / slant
     return met - (gap - min(float(travel.min()), 0.0)) * direction
+
+
+def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) on both fingertips'
+    spheres facing the push `direction`: the front and rims TIP_RIMS off it, TIP_RIM_TURNS round.
+    The first of them to meet the object along the push is where a tip meets it."""
+    side = np.cross(direction, orientation[:, 0] if abs(float(direction @ orientation[:, 0])) < 0.9 else orientation[:, 1])
+    side /= np.linalg.norm(side)
+    other = np.cross(direction, side)
+    tilt, turn = np.meshgrid(TIP_RIMS, TIP_RIM_TURNS)
+    facing = (np.cos(tilt).reshape(-1, 1) * direction
+              + np.sin(tilt).reshape(-1, 1) * (np.cos(turn).reshape(-1, 1) * side + np.sin(turn).reshape(-1, 1) * other))
+    centres = tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
+    return (centres[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
+
+
+def meeting_start(start: np.ndarray, orientation: np.ndarray, direction: np.ndarray, object_pose: np.ndarray,
+                  surface: ObjectSurface, tip_radius: float, gap: float) -> np.ndarray:
+    """`start` (base frame) moved along the push `direction` until the fingertip that meets the
+    object (at `object_pose`) first - rays from the tips' fronts onto its mesh - is `gap` from it.
+    `push_start` sets back by the face's plane: a tip whose line passes beside the face never meets
+    it (sim, plug: the push line 4-6 mm above a face's edge, tips side by side across it - the other
+    tip started 12-14 mm away, and blind pushes counted from `gap` ended 6-8 mm short, three in a row)."""
+    inverse = invert(object_pose)
+    meet = surface.travel(apply(inverse, start + fingertip_fronts(direction, orientation, tip_radius)),
+                          inverse[:3, :3] @ direction)
+    return start if not np.isfinite(meet) else start + (meet - gap) * direction
 
 
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
@@ -944,6 +973,7 @@ class PlanExecutor:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              "would put the pusher's hand into the holding gripper however it is turned")
         views, seen = views[first:], seen[first:]
+        start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap)
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,

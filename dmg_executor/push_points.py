@@ -69,6 +69,13 @@ class ObjectSurface:
         return origin + distance * direction, normal / np.linalg.norm(normal)
 
 
+    def travel(self, points: np.ndarray, direction: np.ndarray) -> float:
+        """How far [m] `points` (n, 3; object frame, outside the object) move along `direction`
+        before the first of them meets the object; inf if none does."""
+        rays = np.hstack([points, np.broadcast_to(direction, points.shape)]).astype(np.float32)
+        return float(self.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().min())
+
+
 def volume_centroid(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Centre of mass of the solid a closed, outward-wound mesh bounds, at uniform density (sum of
     the tetrahedra from the origin to each triangle); the vertices' mean where the mesh bounds no

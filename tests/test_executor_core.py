@@ -220,6 +220,33 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
         assert bool(((tips - point) @ normal).min() > radius) is outside
 
 
+def test_a_push_starts_gap_from_where_a_fingertip_meets_the_object_not_from_the_faces_plane():
+    """The plug's -y face pushed on a line 2 mm above its bottom edge, the fingertips side by side
+    across the push (the lower one 25 deg ahead): push_start sets the lower tip `gap` from the face's
+    plane, but that tip passes below the face - the first tip to meet the plug does so 4 mm later
+    (sim: blind pushes counted from `gap` ended short). meeting_start moves the start until the first
+    meeting is exactly `gap` away; on the face's middle it leaves the start where it was."""
+    from dmg_executor.controller import fingertip_fronts, meeting_start, push_start
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import load_object
+
+    plug, radius, gap = ObjectSurface.of(load_object("plug")), 0.008, 0.006
+    ahead = np.deg2rad(25.0)
+    across = np.array([0.0, -np.sin(ahead), np.cos(ahead)])       # the tips' axis: the lower tip ahead along +y
+    orientation = np.column_stack([across, [1.0, 0.0, 0.0], np.cross(across, [1.0, 0.0, 0.0])])
+    push, normal = np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0])
+    meets = lambda start: plug.travel(start + fingertip_fronts(push, orientation, radius), push)   # noqa: E731
+    for height, late in ((-0.018, True), (0.0, False)):
+        start = push_start(np.array([0.0, -0.030, height]), normal, push, orientation, radius, gap)
+        moved = meeting_start(start, orientation, push, np.eye(4), plug, radius, gap)
+        assert meets(moved) == pytest.approx(gap, abs=1e-4)
+        if late:
+            assert meets(start) > gap + 0.003, meets(start)
+            assert plug.entry(start - radius * across, push) is None      # the lower tip's centre line misses
+        else:
+            assert np.linalg.norm(moved - start) < 1e-4
+
+
 def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
