@@ -68,7 +68,6 @@ class ObjectSurface:
         normal = answer["primitive_normals"].numpy()[0].astype(float)
         return origin + distance * direction, normal / np.linalg.norm(normal)
 
-
     def travel(self, points: np.ndarray, direction: np.ndarray) -> float:
         """How far [m] `points` (n, 3; object frame, outside the object) move along `direction`
         before the first of them meets the object; inf if none does."""
