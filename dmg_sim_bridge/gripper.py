@@ -15,7 +15,7 @@ class GripperSpec:
     finger_length: float = 0.075      # palm to fingertip centre [m] (Baxter standard finger)
     tip_radius: float = 0.008         # hemispherical fingertip radius [m]
     max_opening: float = 0.12         # largest distance between the two tips' inner surfaces [m]
-    kp: float = 2000.0                # position gain [N/m]
+    kp: float = 20000.0               # position gain [N/m]
     max_force: float = 15.0           # default force limit per finger [N]
     force_limit: float = 40.0         # largest force a command may ask for [N]
     finger_mass: float = 0.05         # [kg]
