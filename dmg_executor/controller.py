@@ -40,7 +40,7 @@ from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, overlap, placed, ranked_views, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
-from dmg_planner.transforms import apply, distance, from_rotation, invert
+from dmg_planner.transforms import apply, distance, from_rotation, invert, turn_between
 
 MAX_PUSHES_PER_PRIMITIVE = 4
 MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
@@ -328,7 +328,7 @@ def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
     for orientation in orientations:
         if len(taken) > OTHER_VIEWS:
             break
-        if all(Rotation.from_matrix(orientation @ other.T).magnitude() >= DISTINCT_VIEW for other in taken):
+        if all(turn_between(orientation, other) >= DISTINCT_VIEW for other in taken):
             taken.append(orientation)
     return taken[1:]
 
@@ -1085,7 +1085,7 @@ class PlanExecutor:
         if not look.views:
             return self._next_look_place(obs)
         command = self._go_to(obs, look.place, look.views[0])
-        short = Rotation.from_matrix(look.views[0] @ obs.pusher[:3, :3].T).magnitude()
+        short = turn_between(look.views[0], obs.pusher[:3, :3])
         if short < WAYPOINT_TURN_TOLERANCE or self._stalled(obs, look.place, look.views[0]):   # (as far as the arm turns)
             if look.since is None:
                 look.since = obs.time
@@ -1095,7 +1095,7 @@ class PlanExecutor:
                 if short > VIEW_SHORT:
                     # The wrist is at a limit here: only views near where it got to are tried.
                     look.views = [view for view in look.views
-                                  if Rotation.from_matrix(view @ obs.pusher[:3, :3].T).magnitude() <= VIEW_SHORT]
+                                  if turn_between(view, obs.pusher[:3, :3]) <= VIEW_SHORT]
         return command
 
     def _look_views(self, obs: Observation, place: np.ndarray, neutral: np.ndarray) -> list[np.ndarray]:
@@ -1394,7 +1394,7 @@ class PlanExecutor:
         if target is None:
             target, orientation = self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint]
         offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))
-        turn = 0.0 if orientation is None else Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).magnitude()
+        turn = 0.0 if orientation is None else turn_between(orientation, obs.pusher[:3, :3])
         key = target.tobytes() + (b"" if orientation is None else orientation.tobytes())
         headway = self.headway
         if (headway is None or headway.target != key or offset < headway.offset - HEADWAY[0]
@@ -1406,7 +1406,7 @@ class PlanExecutor:
     def _arrived(self, obs: Observation) -> bool:
         """The pusher is at the current waypoint, turned as wanted there."""
         offset = np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])
-        turn = Rotation.from_matrix(self.push.orientations[self.waypoint] @ obs.pusher[:3, :3].T).magnitude()
+        turn = turn_between(self.push.orientations[self.waypoint], obs.pusher[:3, :3])
         last = self.waypoint == len(self.push.waypoints) - 1   # where a push starts: on its line, precisely
         tolerance = self.settings.position_tolerance if last else self.settings.waypoint_tolerance
         return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE

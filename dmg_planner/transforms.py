@@ -43,4 +43,9 @@ def invert(transform: np.ndarray) -> np.ndarray:
 def distance(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """(translation distance [m], rotation angle [rad]) between two transforms."""
     relative = invert(a) @ b
-    return float(np.linalg.norm(relative[:3, 3])), float(Rotation.from_matrix(relative[:3, :3]).magnitude())
+    return float(np.linalg.norm(relative[:3, 3])), turn_between(a[:3, :3], b[:3, :3])
+
+
+def turn_between(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle [rad] of the turn from orientation `b` to orientation `a` (3x3 rotation matrices)."""
+    return float(Rotation.from_matrix(a @ b.T).magnitude())

@@ -34,6 +34,7 @@ IK_STEP = (0.05, 0.2)         # largest task-space step per iteration: m, rad
 IK_CENTRING_GAIN = 0.1        # share of the distance to mid-range moved per iteration, in the null space
 NULLSPACE_RCOND = 1e-6    # singular values below this share of the largest count as zero (as pinv's rcond)
 OPTICAL_FROM_MUJOCO = Rotation.from_euler("x", np.pi).as_matrix()
+OPENING_SLACK = 1e-3     # m: a gripper command this far beyond the fingers' travel is taken as its end
 
 
 class CellError(ValueError):
@@ -224,8 +225,11 @@ class Cell:
         arm = self._arm(role)
         spec = self.config.gripper
         opening, max_force = (float(v) for v in _finite([opening, max_force], "gripper command"))
-        if not 0.0 <= opening <= spec.max_opening:
+        # A hair beyond the travel is the travel's end: an opening measured past it (fingers pressed apart
+        # against their stop) and sent back as the command is no fault (sim: 0.1200x m, the object pushed out).
+        if not -OPENING_SLACK <= opening <= spec.max_opening + OPENING_SLACK:
             raise CellError(f"opening {opening:.4f} m is outside [0, {spec.max_opening}] m")
+        opening = float(np.clip(opening, 0.0, spec.max_opening))
         if not 0.0 <= max_force <= spec.force_limit:
             raise CellError(f"max_force {max_force:.2f} N is outside [0, {spec.force_limit}] N (0 = default)")
         force = max_force or spec.max_force

@@ -220,6 +220,22 @@ def test_bad_resets_are_refused_with_a_reason_and_keep_the_scene(cell):
     assert cell.opening("arm1") == pytest.approx(0.100, abs=0.002)
 
 
+def test_a_gripper_command_a_hair_past_the_fingers_travel_is_its_end_one_further_is_refused(cell):
+    """An opening measured a hair past the travel (fingers pressed against their stop) and sent
+    back as a command moves the fingers to the travel's end; a command clearly outside is refused
+    with the range and changes nothing."""
+    cell.reset(object_name="box")
+    travel = cell.config.gripper.max_opening
+    cell.command_gripper("arm2", travel + 0.0004, 10.0)
+    assert cell.gripper_status("arm2").target_opening == pytest.approx(travel)
+    cell.command_gripper("arm2", -0.0004, 10.0)
+    assert cell.gripper_status("arm2").target_opening == pytest.approx(0.0, abs=1e-9)
+    for opening in (travel + 0.005, -0.005):
+        with pytest.raises(CellError, match="outside"):
+            cell.command_gripper("arm2", opening, 10.0)
+        assert cell.gripper_status("arm2").target_opening == pytest.approx(0.0, abs=1e-9)
+
+
 @pytest.mark.parametrize("target", ["frames", "run.mp4"])
 def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, target):
     cell.reset(object_name="box")
