@@ -76,6 +76,7 @@ VIEW_SHORT = np.deg2rad(20.0)
 TIP_RIMS = np.deg2rad([0.0, 30.0, 60.0, 80.0])   # fingertip sphere points off the push direction ...
 TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, that may meet the object first
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
+FRUITLESS_NEAR = 0.02   # m: a place this close to one a look saw nothing from counts as that one (vantage places are 5 cm or more apart)
 
 
 class Step(IntEnum):
@@ -396,6 +397,7 @@ class PlanExecutor:
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.pushed_point: PushPoint | None = None   # ... and where on the object
         self.missed: list[PushPoint] = []    # rotation pushes whose pusher turned without turning the object
+        self.fruitless: list[np.ndarray] = []   # places (holder frame) a look saw the object from none of the views at
         self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
@@ -1071,7 +1073,8 @@ class PlanExecutor:
         catches a look that makes no headway)."""
         if self.looking is None:
             place = obs.pusher[:3, 3].copy()
-            self.looking = _Look(place, self._look_views(obs, place, self.pusher_home[:3, :3]))
+            views = [] if self._fruitless(obs, place) else self._look_views(obs, place, self.pusher_home[:3, :3])
+            self.looking = _Look(place, views)
         look = self.looking
         self.unseen_from = obs.time
         if look.travelling:
@@ -1108,6 +1111,7 @@ class PlanExecutor:
     def _next_look_place(self, obs: Observation) -> Command:
         """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST."""
         look = self.looking
+        self.fruitless.append(apply(invert(obs.holder), look.place))
         if look.places is None:
             look.places = self._vantage_places(obs)
         while look.places and look.gone_to < LOOK_PLACES:
@@ -1147,10 +1151,18 @@ class PlanExecutor:
             views, seen = self._views(obs, place, occluders=occluders,
                                       neutral=axes @ turn @ axes.T @ self.pusher_home[:3, :3])
             if seen[0] > 0 or angle == 0.0:
-                found.append((-int(seen[0]), away, place, views[0]))
+                found.append((self._fruitless(obs, place), -int(seen[0]), away, place, views[0]))
                 taken.append(place)
-        found.sort(key=lambda item: item[:2])
-        return [(place, view) for _, _, place, view in found]
+        found.sort(key=lambda item: item[:3])
+        return [(place, view) for *_, place, view in found]
+
+    def _fruitless(self, obs: Observation, place: np.ndarray) -> bool:
+        """Has a look at `place` (base frame) seen nothing before, in this run? Places are kept in the
+        holder's frame, so they move with the grasp; the small pushes between looks leave what a
+        place sees much as it was (sim, bracket: four looks of one run each began at the same two
+        blind places, 13 s each, before the third place saw a tag)."""
+        here = apply(invert(obs.holder), place)
+        return any(np.linalg.norm(here - old) < FRUITLESS_NEAR for old in self.fruitless)
 
     def _look_again(self, obs: Observation) -> Command | None:
         """Wait at the push start for a fresh pose; when none comes within `stale_after`, turn the
@@ -1480,16 +1492,19 @@ class PlanExecutor:
         believed = float((self.reckoned[:3, 3] - self.pushed_reference[:3, 3]) @ direction)
         seen = float((obs.object_in_holder[:3, 3] - self.pushed_reference[:3, 3]) @ direction)
         tolerance = self.settings.position_tolerance
-        if believed > tolerance and seen < tolerance / 2:
-            extra = min(believed - seen, self.settings.gap)
-            self.shortfalls.append((direction.copy(), extra))
-            self.notes.append(f"a blind push of primitive {self.index} did not reach the object (moved {seen * 1000:.1f} "
-                              f"mm, believed {believed * 1000:.1f} mm): pushes that way now reach {extra * 1000:.1f} mm further")
+        if believed > tolerance and abs(believed - seen) > tolerance / 2:
+            self.shortfalls.append((direction.copy(), min(believed - seen, self.settings.gap)))
+            what = "did not reach the object" if seen < tolerance / 2 else "moved the object less than believed"
+            if seen > believed:
+                what = "moved the object further than believed"
+            self.notes.append(f"a blind push of primitive {self.index} {what} (moved {seen * 1000:.1f} mm, believed "
+                              f"{believed * 1000:.1f} mm): pushes that way now reach "
+                              f"{self._shortfall(direction) * 1000:.1f} mm further")
 
     def _shortfall(self, direction: np.ndarray) -> float:
         """How much further on than its pose says the object has been met by blind pushes this way (at most `gap`)."""
         extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= SHORTFALL_COSINE)
-        return min(extra, self.settings.gap)
+        return float(np.clip(extra, 0.0, self.settings.gap))
 
     def _remaining_motion(self, obs: Observation) -> np.ndarray:
         """Object displacement (holder frame) still needed, across the grasp axis only."""

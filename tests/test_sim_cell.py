@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from dmg_perception.tags import detector, tag_corners
 from dmg_planner.objects import config_dir, load_object, object_names
-from dmg_planner.transforms import distance, invert
+from dmg_planner.transforms import distance, invert, turn_between
 from dmg_sim_bridge.cell import Cell, CellError
 from dmg_sim_bridge.gripper import GripperSpec
 from dmg_sim_bridge.recording import FrameRecorder
@@ -144,7 +144,7 @@ def test_a_turn_the_arm_cannot_finish_leaves_the_fingertips_where_they_were(cell
         cell.command_twist("arm2", np.zeros(3), sign * 0.6 * start[:3, axis])
         cell.run(0.01)
         farthest = max(farthest, float(np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - start[:3, 3])))
-    turned = Rotation.from_matrix(cell.grasp_pose("arm2")[:3, :3] @ start[:3, :3].T).magnitude()
+    turned = turn_between(cell.grasp_pose("arm2")[:3, :3], start[:3, :3])
     assert np.rad2deg(turned) < 0.6 * 4.0 * 180 / np.pi - 10.0      # it did hit a limit
     assert farthest < 0.02, farthest
 
