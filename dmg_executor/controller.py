@@ -1502,15 +1502,14 @@ class PlanExecutor:
             return     # the push turned the object too: what it lost along the push is not where it met the face
         if believed > tolerance and abs(believed - seen) > tolerance / 2:
             self.shortfalls.append((direction.copy(), min(believed - seen, self.settings.gap)))
-            what = "moved the object less than believed" if reached else "did not reach the object"
-            if seen > believed:
-                what = "moved the object further than believed"
+            what = ("moved the object further than believed" if seen > believed else
+                    "moved the object less than believed" if reached else "did not reach the object")
             self.notes.append(f"a blind push of primitive {self.index} {what} (moved {seen * 1000:.1f} mm, believed "
                               f"{believed * 1000:.1f} mm): pushes that way now reach "
                               f"{self._shortfall(direction) * 1000:.1f} mm further")
 
     def _shortfall(self, direction: np.ndarray) -> float:
-        """How much further on than its pose says the object has been met by blind pushes this way (at most `gap`)."""
+        """How much further on than its pose says the object has been met by blind pushes this way (0 to `gap`)."""
         extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= SHORTFALL_COSINE)
         return float(np.clip(extra, 0.0, self.settings.gap))
 
