@@ -1114,7 +1114,8 @@ class PlanExecutor:
     def _next_look_place(self, obs: Observation) -> Command:
         """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST."""
         look = self.looking
-        self.fruitless.append(apply(invert(obs.holder), look.place))
+        if not self._fruitless(obs, look.place):
+            self.fruitless.append(apply(invert(obs.holder), look.place))
         if look.places is None:
             look.places = self._vantage_places(obs)
         while look.places and look.gone_to < LOOK_PLACES:
