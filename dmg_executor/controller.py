@@ -24,6 +24,7 @@ an Outcome; `cancel` does the same on request.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -79,6 +80,21 @@ VIEW_SHORT = np.deg2rad(20.0)
 TIP_RIMS = np.deg2rad([0.0, 30.0, 60.0, 80.0])   # fingertip sphere points off the push direction ...
 TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, that may meet the object first
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
+# After the plan, a grasp outside the goal's angle tolerance with its axis tilted more than `level_tilt` off the
+# goal's is pressed back about an axis across it (the object rolling on gripper 1's fingertips, the grip held),
+# down to LEVEL_DONE, at most LEVEL_PUSHES times, by a push along the grasp axis on a face LEVEL_LEVERS beside the
+# grasp's middle (probe: the bracket sagged 12.2 deg at a 15 N grip, a 3 N press 35 mm out -> 6.4 deg; released it
+# stayed). A press that gained less than LEVEL_DONE is not repeated (a grip it cannot roll the object in).
+LEVEL_DONE = np.deg2rad(0.5)
+# A press's tip meets the face up to LEVEL_SLACK after the pusher starts turning (sim, bracket: the gap closed by
+# the pusher's lagging pose left both tips 2.3 mm off the face, and a press turning only as far as the tilt ended
+# as they touched), and goes PRESS_GIVE past it before the object gives way (box, bracket: 0.9-1 mm).
+LEVEL_SLACK = 0.003
+PRESS_GIVE = 0.001
+LEVEL_PUSHES = 2
+LEVEL_LEVERS = np.array([0.035, 0.025])
+LEVEL_OFF_AXIS = np.deg2rad([0.0, 30.0, -30.0])
+LEVEL_REACH_COSINE = np.cos(np.deg2rad(50.0))   # a press at most this far off the way the pusher's fingers point at home
 FRUITLESS_NEAR = 0.02   # m: a place this close to one a look saw nothing from counts as that one (vantage places are 5 cm or more apart)
 
 
@@ -400,12 +416,16 @@ class PlanExecutor:
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.pushed_point: PushPoint | None = None   # ... and where on the object
         self.missed: list[PushPoint] = []    # rotation pushes whose pusher turned without turning the object
+        self.level_index: int | None = None   # the correction that presses the object level (see level_tilt)
+        self.level_axis = np.zeros(3)         # holder frame: the axis the current level push turns the object about
+        self.level_began = 0.0                # rad: the tilt off the goal's grasp axis when leveling began
         self.fruitless: list[np.ndarray] = []   # places (holder frame) a look saw the object from none of the views at
         self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
         self.reckoned_time = -math.inf
         self.holder_turn: _HolderTurn | None = None
+        self.turned_by = 0.0            # rad the holder turned the object about its fingers (to turn back by)
         self.far_side = False           # the holder turned: the pusher faces the side it could not reach
         self.far_side_pushed = False    # ... and has pushed there: turn back to look
         self.may_turn = True            # false once a turn stopped short (the wrist at a limit)
@@ -604,6 +624,9 @@ class PlanExecutor:
             self.push = self._plan_push(primitive, obs)
             self.error_before_push = self._error_and_tolerance()[0]
         except (PushError, RouteError) as error:
+            turn = self._level_turn(obs)
+            if turn is not None:
+                return self._start_holder_turn(obs, back=False, angle=turn)
             if self._push_when_returned(primitive, obs):
                 return self._start_holder_turn(obs, back=False, home=self.holder_start)
             if self._push_when_turned(primitive, obs):
@@ -611,11 +634,12 @@ class PlanExecutor:
             self.far_side_pushed = self.far_side     # (turned, and still no push: turn back)
             # No push can do (the rest of) it: the next primitive aims at its own target from here,
             # and the result says what was left and why.
-            self.notes.append(f"primitive {self.index} ({primitive.kind.name.lower()}) left at "
+            failed = None if self._leveling else primitive.kind
+            self.notes.append(f"primitive {self.index} ({failed.name.lower() if failed else 'level press'}) left at "
                               f"{self.errors[0] * 1000:.1f} mm, {np.rad2deg(self.errors[1]):.1f} deg: no safe push: {error}")
             self.index, self.pushes = self.index + 1, 0
             if self.index == len(self.primitives):
-                self._add_correction(obs, failed=primitive.kind)
+                self._add_correction(obs, failed=failed)
             return Command()
         outside = [p for p in self.push.waypoints + [self.push.start]
                    if np.any(p < self.settings.workspace_min) or np.any(p > self.settings.workspace_max)]
@@ -641,6 +665,22 @@ class PlanExecutor:
         except (PushError, RouteError):
             return False
         return True
+
+    def _level_turn(self, obs: Observation) -> float | None:
+        """Where no level press is found: the turn of the holder about its fingers (+-90 deg) after which
+        the pusher, back where it started, finds one (it presses with its fingers pointing along the grasp
+        axis, which Baxter's right arm does only about the way they point at home)."""
+        if not self._leveling or self.far_side or not self.may_turn:
+            return None
+        for angle in (np.pi / 2, -np.pi / 2):
+            holder = obs.holder.copy()
+            holder[:3, :3] = obs.holder[:3, :3] @ Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix()
+            try:
+                self._plan_push(self.primitives[self.index], replace(obs, holder=holder, pusher=self.pusher_home.copy()))
+            except (PushError, RouteError):
+                continue
+            return angle
+        return None
 
     def _push_when_returned(self, primitive: Primitive, obs: Observation) -> bool:
         """At alpha < 1 the holder moves in the pushes (at 0 it does all of a rotation: turned 45 deg
@@ -669,10 +709,17 @@ class PlanExecutor:
         local = apply(invert(obs.holder), place)
         return float(np.hypot(local[0], local[1])) > self._turn_radius(obs)
 
-    def _start_holder_turn(self, obs: Observation, back: bool, home: np.ndarray | None = None) -> Command:
+    def _start_holder_turn(self, obs: Observation, back: bool, home: np.ndarray | None = None,
+                           angle: float | None = None) -> Command:
         """The pusher back to where it started, then the holder turns the object: `holder_turn` to show
         the pusher the far side, or back after the push there; or, given `home`, the holder goes there."""
-        angle = 0.0 if home is not None else -self.settings.holder_turn if back else self.settings.holder_turn
+        if home is not None:
+            angle = 0.0
+        elif back:
+            angle = -self.turned_by
+        else:
+            angle = self.settings.holder_turn if angle is None else angle
+            self.turned_by = angle
         self.holder_turn = _HolderTurn(angle, back, None if home is None else home.copy())
         self.far_side_pushed = False
         if home is not None:
@@ -682,7 +729,8 @@ class PlanExecutor:
                               "for a push it could not be given where it was")
         elif not back:
             self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
-                              f"{np.rad2deg(angle):.0f} deg about its fingers for a push on its far side")
+                              f"{np.rad2deg(angle):.0f} deg about its fingers for "
+                              f"{'a level press' if self._leveling else 'a push on its far side'}")
         try:
             self._head_home(obs, clear_of_turn=True)
         except RouteError as error:
@@ -772,7 +820,9 @@ class PlanExecutor:
     def _add_correction(self, obs: Observation, failed: PrimitiveKind | None = None) -> None:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,
         a push also turns it): one more translation or rotation to the goal grasp, the larger error
-        first (not the kind that just found no push), up to MAX_CORRECTIONS."""
+        first (not the kind that just found no push), up to MAX_CORRECTIONS besides a level press (see
+        `level_tilt`) comes first where the tilt is more than the turn about the grasp axis left (the
+        holder's turns for it shift the object, which the corrections after it take back), else last."""
         s = self.settings
         self.index -= 1
         self._measure(obs)
@@ -781,18 +831,32 @@ class PlanExecutor:
                   PrimitiveKind.ROTATION: abs(self.errors[1]) / s.angle_tolerance}
         shares.pop(failed, None)
         kind = max(shares, key=shares.get)
-        if self.settled or shares[kind] <= RETRY_FACTOR or len(self.primitives) - self.plan_length >= MAX_CORRECTIONS:
-            return
-        self.primitives.append(replace(self.primitives[-1], kind=kind))
+        corrections = len(self.primitives) - self.plan_length - (self.level_index is not None)
+        corrected = self.settled or shares[kind] <= RETRY_FACTOR or corrections >= MAX_CORRECTIONS
+        if self._needs_leveling(obs) and (corrected or np.linalg.norm(self._tilt_off_goal(obs)) > abs(self.errors[1])):
+            self.level_index = len(self.primitives)
+            self.level_began = float(np.linalg.norm(self._tilt_off_goal(obs)))
+            self.primitives.append(replace(self.primitives[-1]))
+            self.notes.append(f"the grasp axis was {np.rad2deg(self.level_began):.1f} deg off the goal's: "
+                              f"primitive {self.level_index} presses the object level")
+        elif not corrected:
+            self.primitives.append(replace(self.primitives[-1], kind=kind))
 
     def _primitive_finished(self, obs: Observation) -> bool:
-        """Within tolerance, or close enough after a push, or out of pushes, or settled near the goal."""
+        """Within tolerance, or close enough after a push, or out of pushes, or settled near the goal (a level
+        press: level, or out of presses, or the last gained nothing)."""
         error, tolerance = self._error_and_tolerance()
+        if self._leveling:
+            gained = self.level_began - error
+            return error <= tolerance or self.pushes >= LEVEL_PUSHES or (self.pushes > 0 and gained < LEVEL_DONE)
         return (error <= tolerance or (self.pushes > 0 and error <= RETRY_FACTOR * tolerance)
                 or self.pushes >= MAX_PUSHES_PER_PRIMITIVE or self._settled(obs, error, tolerance))
 
     def _error_and_tolerance(self) -> tuple[float, float]:
-        """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation)."""
+        """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation
+        and for the tilt a level push presses back)."""
+        if self._leveling:
+            return float(np.linalg.norm(self._tilt_off_goal(self.last))), self.settings.level_tilt
         if self.primitives[self.index].kind == PrimitiveKind.TRANSLATION:
             return self.errors[0], self.settings.position_tolerance
         return abs(self.errors[1]), self.settings.angle_tolerance
@@ -821,6 +885,8 @@ class PlanExecutor:
         s = self.settings
         holder_in_object = invert(obs.object_in_holder)
         occluders = Occluders.of(self.shape, obs.holder, obs.opening)
+        if self._leveling:
+            return self._plan_level_push(obs, occluders)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             # Square onto a face round the grasp axis, along the normal line through the grasp's middle
             # (the contact force is along the face's normal: off that line it would turn the object),
@@ -863,6 +929,45 @@ class PlanExecutor:
             if candidates:   # first of the best seen: the longest lever beyond the tips
                 return max(candidates, key=lambda candidate: candidate[1])[0]
         raise PushError("; ".join(problems))
+
+    def _plan_level_push(self, obs: Observation, occluders: Occluders) -> _Push:
+        """A push along the grasp axis on a face beside the grasp's middle that turns the object about the
+        axis across it the tilt needs (`rotation_push` about that axis), beyond the fingertips or beside
+        the fingers, never between them towards the palm; one the camera sees from its start."""
+        s = self.settings
+        tilt = self._tilt_off_goal(obs)
+        angle = float(np.linalg.norm(tilt))
+        self.level_axis = tilt / angle
+        holder_in_object = invert(obs.object_in_holder)
+        middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
+        pushes, problems = [], []
+        for depth, off, along in itertools.product(LEVEL_LEVERS, LEVEL_OFF_AXIS, (1.0, -1.0)):
+            # (an axis turned `off` about the grasp axis: most of the turn, a little across it, the next push's)
+            axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(self.level_axis)
+            try:
+                push = rotation_push(self.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
+                                     -angle, depth, 0.0, s.edge_margin)
+            except PushError as error:
+                problems.append(str(error))
+                continue
+            lever = rotation.T @ (push.point - middle)      # holder frame
+            if lever[2] < 0.0 and abs(lever[1]) < 2 * s.tip_radius:
+                problems.append(f"the level push at {np.round(lever * 1000, 1).tolist()} mm is between the fingers")
+                continue
+            pushes.append(push)
+        if not pushes:
+            raise PushError("no level push: " + "; ".join(problems))
+        candidates = self._watched(obs, pushes, occluders)
+        if not self.settings.blind_pushes:
+            candidates = [c for c in candidates if c[1] > 0]
+        if not candidates:
+            raise PushError("the wrist camera would see none of the object's tags from where a level push starts")
+        # The pusher's fingers point along the press: only a press the way they point at its start is reachable.
+        reach = self.pusher_home[:3, 2]
+        candidates = [c for c in candidates if float(c[0].direction @ reach) > LEVEL_REACH_COSINE]
+        if not candidates:
+            raise PushError("no level push runs the way the pusher's fingers point where it started")
+        return max(candidates, key=lambda c: (c[1] > 0, float(c[0].direction @ reach)))[0]
 
     def _rotation_pushes(self, obs: Observation, directions: np.ndarray, angle: float, problems: list[str]) -> list[PushPoint]:
         """Push points turning the object by `angle` about x, pushed along `directions` (holder frame),
@@ -939,7 +1044,9 @@ class PlanExecutor:
         # A translation is pushed on dead reckoning and looked at after; a rotation is not: unseen, nothing
         # tells that its pusher slid off, shoves the object across the fingers or turns in the air (sim:
         # the plug's blind far-side rotations dropped it in 4 of 6 runs).
-        if not watched and self.settings.blind_pushes and self._primitive.kind == PrimitiveKind.TRANSLATION:
+        # (A level press unseen presses no further than the tilt it began with.)
+        if not watched and self.settings.blind_pushes and (self._primitive.kind == PrimitiveKind.TRANSLATION
+                                                           or self._leveling):
             return candidates
         if not watched:
             raise PushError("the wrist camera would see none of the object's tags from where the push starts "
@@ -1160,6 +1267,26 @@ class PlanExecutor:
         found.sort(key=lambda item: item[:3])
         return [(place, view) for *_, place, view in found]
 
+    def _tilt_off_goal(self, obs: Observation) -> np.ndarray:
+        """Rotation vector (holder frame, across the grasp axis) that would turn the object so that the
+        grasp axis lies on the object as the goal grasp's does."""
+        turn = Rotation.from_matrix(self._target()[:3, :3] @ obs.object_in_holder[:3, :3].T).as_rotvec()
+        turn[0] = 0.0
+        return turn
+
+    def _needs_leveling(self, obs: Observation) -> bool:
+        """After the plan (once a run): is the grasp outside the goal's angle tolerance (as the run's end
+        judges it) with its axis certainly tilted more than `level_tilt` off the goal's? Only then: each
+        turn of the holder a press needs shifts the object ~1 mm in the grip (sim: box, plug)."""
+        s = self.settings
+        return (self.level_index is None and s.level_tilt > 0.0 and obs.object_tilt_sigma <= s.slip_tilt_sigma
+                and self.final_errors(obs)[1] > s.goal_angle_tolerance
+                and np.linalg.norm(self._tilt_off_goal(obs)) > s.level_tilt)
+
+    @property
+    def _leveling(self) -> bool:
+        return self.level_index is not None and self.index == self.level_index
+
     def _fruitless(self, obs: Observation, place: np.ndarray) -> bool:
         """Has a look at `place` (base frame) seen nothing before, in this run? Places are kept in the
         holder's frame, so they move with the grasp; the small pushes between looks leave what a
@@ -1188,7 +1315,7 @@ class PlanExecutor:
         primitive = self.primitives[self.index]
         if self.phase == "loosen":
             if obs.time < self.grip_until:
-                return Command(holder_grip=self._loosened(obs))
+                return Command(holder_grip=self._held() if self._leveling else self._loosened(obs))
             self.phase, self.held_reference = "push", None
             self.far_side_pushed = self.far_side
             self.pushed_reference = obs.object_in_holder.copy()
@@ -1200,7 +1327,8 @@ class PlanExecutor:
             along = self.push.local_direction
             face = apply(obs.object_in_holder, self.push.contact.point)
             self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher, apply(invert(pusher), face - s.gap * along),
-                                       face + self._shortfall(along) * along, along.copy(),
+                                       face + self._shortfall(along) * along,
+                                       np.zeros(3) if self._leveling else along.copy(),   # (a level push: believed unmoved)
                                        turning=primitive.kind == PrimitiveKind.ROTATION)
             self.reckoning.moved(obs.time, pusher)
             # Close the gap along the push line first, at push speed: turning from `gap` away, a rotation's
@@ -1212,13 +1340,15 @@ class PlanExecutor:
             self.phase = "touch"
         if self.phase == "touch":
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
-            short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION else 0.0
+            short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION and not self._leveling else 0.0
             seen = self.reckoning.pose
             met = (_slid_since(self.pushed_reference, seen) > TOUCHED
                    or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN)
+            if self._leveling:     # (turned off the grasp axis; pose noise reaches 0.5 deg)
+                met = turn_between(seen[:3, :3], self.pushed_reference[:3, :3]) > TURN_GAIN
             if closed < s.gap - short and not met:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
-                command.holder_grip = self._loosened(obs)
+                command.holder_grip = self._held() if self._leveling else self._loosened(obs)
                 return command
             self.phase = "push"
         if self.phase == "tighten":
@@ -1228,6 +1358,8 @@ class PlanExecutor:
             self._enter(Step.LEAVE, obs)
             return Command()
         holder = obs.holder
+        if self._leveling:
+            return self._press_level(obs)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
             if along <= s.position_tolerance:
@@ -1268,6 +1400,24 @@ class PlanExecutor:
             relative = np.concatenate([np.zeros(3), np.sign(left) * rate * holder[:3, 0]])   # about the grasp axis
         command = self._coordinated(obs, relative)
         command.holder_grip = self._loosened(obs)
+        return command
+
+    def _press_level(self, obs: Observation) -> Command:
+        """Turn the object about `level_axis` through the grasp's middle, the grip held, under P control on
+        the tilt left along that axis; stop when it is under LEVEL_DONE, or once the pusher has turned the
+        tilt the press began with and the slack its tip may meet the face late by (seen: LEVEL_SLACK, the
+        seen tilt stops it first; unseen: only the give before the object moves, PRESS_GIVE)."""
+        s = self.settings
+        left = float(self._tilt_off_goal(obs) @ self.level_axis)
+        began = float(Rotation.from_matrix(self._target()[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec() @ self.level_axis)
+        pusher_turned = turn_between((invert(obs.holder) @ obs.pusher)[:3, :3], self.pushed_from[:3, :3])
+        lever = max(self.push.lever, 1e-3)
+        slack = (PRESS_GIVE if self.reckoning.blind else LEVEL_SLACK) / lever
+        if left <= LEVEL_DONE or pusher_turned > began + slack:
+            return self._tighten(obs)
+        rate = float(np.clip(s.angular_gain * left, s.min_push_speed / lever, min(s.max_angular_speed, s.push_speed / lever)))
+        command = self._coordinated(obs, np.concatenate([np.zeros(3), rate * (obs.holder[:3, :3] @ self.level_axis)]))
+        command.holder_grip = self._held()
         return command
 
     def _turn_stalled(self, pusher_turned: float, turned: float) -> bool:
@@ -1485,7 +1635,7 @@ class PlanExecutor:
         further on. A rotation that did not turn the object at all
         while dead reckoning had it turned missed the face (sim: the plug's far side, the same push
         planned five times): it is not planned again."""
-        if self.reckoning is None or not self.reckoning.blind or self.pushed_reference is None:
+        if self.reckoning is None or not self.reckoning.blind or self.pushed_reference is None or self._leveling:
             return
         if self._primitive.kind == PrimitiveKind.ROTATION:
             believed = _turned_since(self.pushed_reference, self.reckoned)

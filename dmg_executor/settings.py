@@ -67,6 +67,7 @@ class ExecutorSettings:
     stall_time: float
     blind_pushes: bool
     holder_turn: float             # rad
+    level_tilt: float              # rad
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":

@@ -979,9 +979,11 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
 
 
 @pytest.fixture(scope="module")
-def far_side_run(loop_parts):
-    """Makes executors for the bracket's grasp 15 mm along its -y: the bracket must move 15 mm towards
-    the pusher, pushed on its far side, 60 mm beyond the grasp (on loop_parts' cell)."""
+def bracket_run(loop_parts):
+    """Makes executors for the bracket's default grasp moved by `shift` (gripper 1's frame), by default
+    15 mm along its -y: the bracket must move 15 mm towards the pusher, pushed on its far side, 60 mm
+    beyond the grasp; the bracket held `tilt_deg` about gripper 1's finger axis off the grasp the plan
+    starts from (on loop_parts' cell)."""
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
@@ -1002,10 +1004,14 @@ def far_side_run(loop_parts):
     loop = ClosedLoop(cell, ObjectPoseEstimator([model]))
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
 
-    def make(**overrides) -> PlanExecutor:
+    def make(shift=(0.0, -0.015, 0.0), tilt_deg: float = 0.0, **overrides) -> PlanExecutor:
         start = invert(cell.reset("bracket", restart_clock=True).object_in_gripper)   # as run alone, whatever ran before
+        if tilt_deg:
+            held = start.copy()
+            held[:3, :3] = start[:3, :3] @ Rotation.from_rotvec(np.deg2rad([0.0, 0.0, tilt_deg])).as_matrix()
+            cell.reset("bracket", object_in_gripper=invert(held), restart_clock=True)
         goal = start.copy()
-        goal[:3, 3] -= 0.015 * start[:3, 1]
+        goal[:3, 3] += start[:3, :3] @ np.asarray(shift)
         result = plan(graph, pose(start), pose(goal))
         executor = PlanExecutor(ExecutorSettings.defaults(**overrides), ObjectSurface.of(model), result.primitives,
                                 result.principal_finger, 1.0, cell.time, loop.camera_model(), TagLayout.of(model))
@@ -1015,11 +1021,11 @@ def far_side_run(loop_parts):
     return cell, loop, make
 
 
-def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(far_side_run):
+def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(bracket_run):
     from dmg_executor.controller import Outcome
     from dmg_planner.transforms import distance, invert, turn_between
 
-    cell, loop, make = far_side_run
+    cell, loop, make = bracket_run
     # Without turning the bracket, the far-side push would put the pusher's hand through gripper 1.
     executor = make(holder_turn_deg=0.0)
     refused = loop.run(executor, time_limit=60)
@@ -1049,11 +1055,11 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
-def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_side_run):
+def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket_run):
     from dmg_executor.controller import Outcome
     from dmg_planner.transforms import turn_between
 
-    cell, loop, make = far_side_run
+    cell, loop, make = bracket_run
     executor = make()
     holder_before = cell.grasp_pose("arm1")
     stuck_from, ends = None, cell.time + 150
@@ -1076,6 +1082,44 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(far_sid
     holder_after = cell.grasp_pose("arm1")                                    # turned back, held
     assert np.rad2deg(turn_between(holder_after[:3, :3], holder_before[:3, :3])) < 3.0
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_grip_held(bracket_run):
+    """The bracket held 5 deg about gripper 1's finger axis off the grasp the plan starts from (a sag the
+    grip holds), moved 5 mm along the fingers: the translation leaves the grasp axis tilted more than the
+    goal's angle tolerance. With `level_tilt_deg: 0` the run ends there, OUT_OF_TOLERANCE; by default a
+    press along the grasp axis beside the grasp turns it back to within 1 deg, the grip at the hold force
+    while pressing, and the run ends OK (sim: 3.9 -> 0.3 deg in 1.5 s at ~1 N)."""
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, make = bracket_run
+
+    def tilt(executor) -> float:
+        reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
+        return float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+
+    unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, level_tilt_deg=0.0)
+    outcome = loop.run(unleveled, time_limit=150)
+    assert outcome.outcome == Outcome.OUT_OF_TOLERANCE and tilt(unleveled) > 3.0, (outcome.message, tilt(unleveled))
+    assert unleveled.level_index is None
+
+    executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
+    pressed, grips, ends = [], [], cell.time + 150
+    while not executor.done and cell.time < ends:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+        if executor.index == executor.level_index and executor.step.name == "EXECUTE" and executor.phase == "push":
+            pressed.append(tilt(executor))
+            grips.append(cell.gripper_status("arm1").max_force)
+    outcome = executor.result
+    assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt(executor))
+    assert "presses the object level" in outcome.message
+    assert pressed and pressed[0] > 3.0 and min(pressed) < 1.0, pressed      # pressed from > 3 to < 1 deg ...
+    assert tilt(executor) < 1.0                                               # ... and it stayed
+    assert min(grips) == pytest.approx(executor.settings.hold_force, rel=0.05), grips     # the grip held
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
 
 
 def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
