@@ -833,9 +833,9 @@ class PlanExecutor:
         kind = max(shares, key=shares.get)
         corrections = len(self.primitives) - self.plan_length - (self.level_index is not None)
         corrected = self.settled or shares[kind] <= RETRY_FACTOR or corrections >= MAX_CORRECTIONS
-        if self._needs_leveling(obs) and (corrected or np.linalg.norm(self._tilt_off_goal(obs)) > abs(self.errors[1])):
-            self.level_index = len(self.primitives)
-            self.level_began = float(np.linalg.norm(self._tilt_off_goal(obs)))
+        tilt = float(np.linalg.norm(self._tilt_off_goal(obs.object_in_holder))) if self._needs_leveling(obs) else 0.0
+        if tilt and (corrected or tilt > abs(self.errors[1])):
+            self.level_index, self.level_began = len(self.primitives), tilt
             self.primitives.append(replace(self.primitives[-1]))
             self.notes.append(f"the grasp axis was {np.rad2deg(self.level_began):.1f} deg off the goal's: "
                               f"primitive {self.level_index} presses the object level")
@@ -856,7 +856,7 @@ class PlanExecutor:
         """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation
         and for the tilt a level push presses back)."""
         if self._leveling:
-            return float(np.linalg.norm(self._tilt_off_goal(self.last))), self.settings.level_tilt
+            return float(np.linalg.norm(self._tilt_off_goal(self.last.object_in_holder))), self.settings.level_tilt
         if self.primitives[self.index].kind == PrimitiveKind.TRANSLATION:
             return self.errors[0], self.settings.position_tolerance
         return abs(self.errors[1]), self.settings.angle_tolerance
@@ -935,7 +935,7 @@ class PlanExecutor:
         axis across it the tilt needs (`rotation_push` about that axis), beyond the fingertips or beside
         the fingers, never between them towards the palm; one the camera sees from its start."""
         s = self.settings
-        tilt = self._tilt_off_goal(obs)
+        tilt = self._tilt_off_goal(obs.object_in_holder)
         angle = float(np.linalg.norm(tilt))
         self.level_axis = tilt / angle
         holder_in_object = invert(obs.object_in_holder)
@@ -1044,7 +1044,7 @@ class PlanExecutor:
         # A translation is pushed on dead reckoning and looked at after; a rotation is not: unseen, nothing
         # tells that its pusher slid off, shoves the object across the fingers or turns in the air (sim:
         # the plug's blind far-side rotations dropped it in 4 of 6 runs).
-        # (A level press unseen presses no further than the tilt it began with.)
+        # (A level press unseen turns no further than the tilt it began with and the give, PRESS_GIVE.)
         if not watched and self.settings.blind_pushes and (self._primitive.kind == PrimitiveKind.TRANSLATION
                                                            or self._leveling):
             return candidates
@@ -1267,10 +1267,10 @@ class PlanExecutor:
         found.sort(key=lambda item: item[:3])
         return [(place, view) for *_, place, view in found]
 
-    def _tilt_off_goal(self, obs: Observation) -> np.ndarray:
-        """Rotation vector (holder frame, across the grasp axis) that would turn the object so that the
-        grasp axis lies on the object as the goal grasp's does."""
-        turn = Rotation.from_matrix(self._target()[:3, :3] @ obs.object_in_holder[:3, :3].T).as_rotvec()
+    def _tilt_off_goal(self, object_in_holder: np.ndarray) -> np.ndarray:
+        """Rotation vector (holder frame, across the grasp axis) that would turn the object from
+        `object_in_holder` so that the grasp axis lies on it as the goal grasp's does."""
+        turn = Rotation.from_matrix(self._target()[:3, :3] @ object_in_holder[:3, :3].T).as_rotvec()
         turn[0] = 0.0
         return turn
 
@@ -1281,7 +1281,7 @@ class PlanExecutor:
         s = self.settings
         return (self.level_index is None and s.level_tilt > 0.0 and obs.object_tilt_sigma <= s.slip_tilt_sigma
                 and self.final_errors(obs)[1] > s.goal_angle_tolerance
-                and np.linalg.norm(self._tilt_off_goal(obs)) > s.level_tilt)
+                and np.linalg.norm(self._tilt_off_goal(obs.object_in_holder)) > s.level_tilt)
 
     @property
     def _leveling(self) -> bool:
@@ -1342,10 +1342,11 @@ class PlanExecutor:
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
             short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION and not self._leveling else 0.0
             seen = self.reckoning.pose
-            met = (_slid_since(self.pushed_reference, seen) > TOUCHED
-                   or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN)
             if self._leveling:     # (turned off the grasp axis; pose noise reaches 0.5 deg)
                 met = turn_between(seen[:3, :3], self.pushed_reference[:3, :3]) > TURN_GAIN
+            else:
+                met = (_slid_since(self.pushed_reference, seen) > TOUCHED
+                       or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN)
             if closed < s.gap - short and not met:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._held() if self._leveling else self._loosened(obs)
@@ -1408,8 +1409,8 @@ class PlanExecutor:
         tilt the press began with and the slack its tip may meet the face late by (seen: LEVEL_SLACK, the
         seen tilt stops it first; unseen: only the give before the object moves, PRESS_GIVE)."""
         s = self.settings
-        left = float(self._tilt_off_goal(obs) @ self.level_axis)
-        began = float(Rotation.from_matrix(self._target()[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec() @ self.level_axis)
+        left = float(self._tilt_off_goal(obs.object_in_holder) @ self.level_axis)
+        began = float(self._tilt_off_goal(self.pushed_reference) @ self.level_axis)
         pusher_turned = turn_between((invert(obs.holder) @ obs.pusher)[:3, :3], self.pushed_from[:3, :3])
         lever = max(self.push.lever, 1e-3)
         slack = (PRESS_GIVE if self.reckoning.blind else LEVEL_SLACK) / lever
