@@ -60,7 +60,7 @@ def test_topic_echo_once_sees_another_process(processes):
     assert as_json.returncode == 0, as_json.stderr
     assert [set(json.loads(line)) for line in as_json.stdout.splitlines()] == [{"data"}, {"data"}]
 
-    listing = dmg("topic", "list", "-t", "--spin-time", "3")
+    listing = dmg("topic", "list", "-t", "--spin-time", "8")
     assert "/counter [std_msgs/msg/Int32]" in listing.stdout.splitlines()
 
 
