@@ -86,12 +86,16 @@ SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands
 # grasp's middle (probe: the bracket sagged 12.2 deg at a 15 N grip, a 3 N press 35 mm out -> 6.4 deg; released it
 # stayed). A press that gained less than LEVEL_DONE is not repeated (a grip it cannot roll the object in).
 LEVEL_DONE = np.deg2rad(0.5)
-# A press's tip meets the face up to LEVEL_SLACK after the pusher starts turning (sim, bracket: the gap closed by
-# the pusher's lagging pose left both tips 2.3 mm off the face, and a press turning only as far as the tilt ended
-# as they touched), and goes PRESS_GIVE past it before the object gives way (box, bracket: 0.9-1 mm).
+# A press's tip meets the face up to LEVEL_SLACK after the pusher starts turning (the pose it was planned from
+# errs along the push; sim, bracket: the tips met it 1-1.5 mm past the gap), and goes PRESS_GIVE past it before
+# the object gives way (box, bracket: 0.9-1 mm).
 LEVEL_SLACK = 0.003
 PRESS_GIVE = 0.001
 LEVEL_PUSHES = 2
+# A press rolls the object on gripper 1's fingertips about the grasp's middle, which stays put; once the grasp has
+# slid this far on the object it shoves the object across them instead (sim: the plug at alpha 0, its face 5 mm
+# nearer than seen, shoved 5.6 mm while the gap closed, then SLIP).
+LEVEL_SLIDE = 0.002
 LEVEL_LEVERS = np.array([0.035, 0.025])
 LEVEL_OFF_AXIS = np.deg2rad([0.0, 30.0, -30.0])
 LEVEL_REACH_COSINE = np.cos(np.deg2rad(50.0))   # a press at most this far off the way the pusher's fingers point at home
@@ -405,10 +409,13 @@ class PlanExecutor:
         self.reference_pending = False
         self.looking: _Look | None = None
         self.searching = False          # the held object went unseen on the way to a push: look for it
+        self.seeking_certain = False    # ... or the plan's end is to be judged from an uncertain pose: look for a certain one
+        self.sought_certain = False     # a look for a certain pose was made since the last push
         self.error_before_push = math.inf   # the current primitive's error when its last push was planned
         self.settled = False            # near the goal, and pushes make no headway: no more of them
         self.headway: _Headway | None = None
         self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
+        self.slip_streak: list[np.ndarray] = []   # ... those poses (holder frame)
         self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
@@ -501,7 +508,8 @@ class PlanExecutor:
         # 7-10 mm off); the held pose is known.
         trusted = self.holder_turn is None and (not self.far_side or self._certain(obs))
         fresh = trusted and obs.time - obs.object_time <= s.stale_after
-        self.searching = self.searching and not fresh
+        self.searching = self.searching and not (fresh and (not self.seeking_certain or self._certain(obs)))
+        self.seeking_certain = self.seeking_certain and self.searching
         if self._pushing() and s.blind_pushes:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
             # up for, and the push goes on when the camera loses the object.
@@ -596,6 +604,25 @@ class PlanExecutor:
         return (self.held_reference is not None and self.held_sigma > limit
                 and obs.object_position_sigma <= limit)
 
+    def _end_uncertain(self) -> bool:
+        """Is the plan's last primitive (or correction) about to be judged from a held pose too uncertain of its
+        position to tell, with no look for a better one since the last push? (sim, plug: a lone tag seen
+        obliquely at the end, 1.2-3.6 mm sigma, put a grasp 2.5 mm from its goal 2.4-8.1 mm from it.)"""
+        return not self.sought_certain and (self.held_reference is None
+                                            or self.held_sigma > self.settings.slip_position_sigma)
+
+    def _push_reference(self, obs: Observation) -> np.ndarray:
+        """The pose a push starts from: the latest seen, if fresh and certain - the push's own poses are
+        single poses from this view, while the held reference may average poses from the views on the way
+        (sim, bracket: 4.2 deg of tilt averaged over an approach, 2.9 deg seen at the push start, 2.7 true;
+        a level press took the difference for the object turning back and stopped closing its gap) - else
+        the held reference (a blind push)."""
+        seen = self.last
+        if (seen.object_in_holder is not None and seen.time - seen.object_time <= self.settings.stale_after
+                and self.holder_turn is None and self._certain(seen)):
+            return seen.object_in_holder.copy()
+        return obs.object_in_holder.copy()
+
     def _held_better_than(self, obs: Observation) -> bool:
         """Is the held reference (a pose certain of its position, the grip closed since) a better account
         of where the object is than this pose: one too uncertain to show that it moved, or any single
@@ -613,6 +640,9 @@ class PlanExecutor:
             return self._look_around(obs)     # plan the next push from a fresh pose
         self.looking = None
         while self.index < len(self.primitives) and self._primitive_finished(obs):
+            if self.index == len(self.primitives) - 1 and self._end_uncertain():
+                self.sought_certain = self.seeking_certain = self.searching = True
+                return self._look_around(obs)
             self.index, self.pushes = self.index + 1, 0
             if self.index == len(self.primitives):
                 self._add_correction(obs)
@@ -646,7 +676,7 @@ class PlanExecutor:
         if outside:
             return self._abort(Outcome.LIMIT_VIOLATION, f"primitive {self.index}: the push needs the pusher at "
                                f"{np.round(outside[0], 3).tolist()} m, outside the workspace")
-        self.waypoint = 0
+        self.waypoint, self.sought_certain = 0, False
         self._enter(Step.APPROACH, obs)
         return Command()
 
@@ -1219,7 +1249,8 @@ class PlanExecutor:
         return [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0])
 
     def _next_look_place(self, obs: Observation) -> Command:
-        """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST."""
+        """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST (or, looking
+        for a certain pose of an object seen, on with the uncertain one)."""
         look = self.looking
         if not self._fruitless(obs, look.place):
             self.fruitless.append(apply(invert(obs.holder), look.place))
@@ -1235,6 +1266,11 @@ class PlanExecutor:
             look.travelling, look.place, look.since = True, place, None
             self.step_started = obs.time
             return self._along_route(obs)
+        if self.seeking_certain:     # seen, if not for certain: judged from what was seen
+            self.searching = self.seeking_certain = False
+            self.notes.append(f"primitive {self.index} judged from a pose uncertain by {self.held_sigma * 1000:.1f} mm: "
+                              f"none of {look.gone_to} vantage place(s) gave a certain one")
+            return Command()
         return self._abort(Outcome.OBJECT_LOST, f"object pose lost (last seen {obs.time - obs.object_time:.1f} s ago): "
                            f"not seen from where the pusher stood nor from {look.gone_to} vantage place(s) round "
                            f"it, during {self.step.name} of primitive {self.index}: stopped, gripper 1 closed at "
@@ -1275,12 +1311,14 @@ class PlanExecutor:
         return turn
 
     def _needs_leveling(self, obs: Observation) -> bool:
-        """After the plan (once a run): is the grasp outside the goal's angle tolerance (as the run's end
-        judges it) with its axis certainly tilted more than `level_tilt` off the goal's? Only then: each
-        turn of the holder a press needs shifts the object ~1 mm in the grip (sim: box, plug)."""
+        """After the plan (once a run): is the grasp outside the goal's tolerances (as the run's end judges
+        it; the principal contact's error takes in the tilt times the contact's distance from the grasp's
+        middle) with its axis certainly tilted more than `level_tilt` off the goal's? Only then: each turn
+        of the holder a press needs shifts the object ~1 mm in the grip (sim: box, plug)."""
         s = self.settings
+        position, angle = self.final_errors(obs)
         return (self.level_index is None and s.level_tilt > 0.0 and obs.object_tilt_sigma <= s.slip_tilt_sigma
-                and self.final_errors(obs)[1] > s.goal_angle_tolerance
+                and (position > s.goal_position_tolerance or angle > s.goal_angle_tolerance)
                 and np.linalg.norm(self._tilt_off_goal(obs.object_in_holder)) > s.level_tilt)
 
     @property
@@ -1318,7 +1356,7 @@ class PlanExecutor:
                 return Command(holder_grip=self._held() if self._leveling else self._loosened(obs))
             self.phase, self.held_reference = "push", None
             self.far_side_pushed = self.far_side
-            self.pushed_reference = obs.object_in_holder.copy()
+            self.pushed_reference = self._push_reference(obs)
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
             self.pushed_point = self.push.contact
@@ -1326,7 +1364,7 @@ class PlanExecutor:
             # on, where blind pushes this way fell short).
             along = self.push.local_direction
             face = apply(obs.object_in_holder, self.push.contact.point)
-            self.reckoning = Reckoning(obs.object_in_holder.copy(), pusher, apply(invert(pusher), face - s.gap * along),
+            self.reckoning = Reckoning(self.pushed_reference.copy(), pusher, apply(invert(pusher), face - s.gap * along),
                                        face + self._shortfall(along) * along,
                                        np.zeros(3) if self._leveling else along.copy(),   # (a level push: believed unmoved)
                                        turning=primitive.kind == PrimitiveKind.ROTATION)
@@ -1342,11 +1380,12 @@ class PlanExecutor:
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
             short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION and not self._leveling else 0.0
             seen = self.reckoning.pose
-            if self._leveling:     # (turned off the grasp axis; pose noise reaches 0.5 deg)
-                met = turn_between(seen[:3, :3], self.pushed_reference[:3, :3]) > TURN_GAIN
+            met = _slid_since(self.pushed_reference, seen) > TOUCHED
+            if self._leveling:     # or pressed back about the level axis (pose noise reaches 0.5 deg; the turn about
+                # the grasp axis, 1.4 deg between two poses of a still bracket, is none of the press's business)
+                met = met or self._level_left(self.pushed_reference) - self._level_left(seen) > TURN_GAIN
             else:
-                met = (_slid_since(self.pushed_reference, seen) > TOUCHED
-                       or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN)
+                met = met or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN
             if closed < s.gap - short and not met:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._held() if self._leveling else self._loosened(obs)
@@ -1409,17 +1448,35 @@ class PlanExecutor:
         tilt the press began with and the slack its tip may meet the face late by (seen: LEVEL_SLACK, the
         seen tilt stops it first; unseen: only the give before the object moves, PRESS_GIVE)."""
         s = self.settings
-        left = float(self._tilt_off_goal(obs.object_in_holder) @ self.level_axis)
-        began = float(self._tilt_off_goal(self.pushed_reference) @ self.level_axis)
+        left, began = self._level_left(obs.object_in_holder), self._level_left(self.pushed_reference)
         pusher_turned = turn_between((invert(obs.holder) @ obs.pusher)[:3, :3], self.pushed_from[:3, :3])
         lever = max(self.push.lever, 1e-3)
         slack = (PRESS_GIVE if self.reckoning.blind else LEVEL_SLACK) / lever
         if left <= LEVEL_DONE or pusher_turned > began + slack:
             return self._tighten(obs)
+        slid = _slid_since(self.pushed_reference, obs.object_in_holder)
+        if slid > LEVEL_SLIDE:
+            self.notes.append(f"a level press of primitive {self.index} stopped: the grasp slid {slid * 1000:.1f} mm "
+                              "on the object (shoved across the fingers, not rolled on them)")
+            return self._tighten(obs)
         rate = float(np.clip(s.angular_gain * left, s.min_push_speed / lever, min(s.max_angular_speed, s.push_speed / lever)))
         command = self._coordinated(obs, np.concatenate([np.zeros(3), rate * (obs.holder[:3, :3] @ self.level_axis)]))
         command.holder_grip = self._held()
         return command
+
+    def _level_left(self, object_in_holder: np.ndarray) -> float:
+        """rad of tilt off the goal's grasp axis that a press has still to turn back: along the way the object
+        is seen turning once it has turned TURN_GAIN since the press began (about the way it should), before
+        that along `level_axis`.
+        A press turns the object about an axis of its own (sim, bracket: pushed to turn it about an axis 30
+        deg off the tilt's, it turned about one 43 deg off, and pressed on until the tilt along the tilt's
+        axis was gone, it ended as tilted as it began); along the way it turns, the tilt is least where
+        none is left."""
+        tilt = self._tilt_off_goal(object_in_holder)
+        turned = self._tilt_off_goal(self.pushed_reference) - tilt
+        way = float(np.linalg.norm(turned))
+        seen_way = way > TURN_GAIN and float(turned @ self.level_axis) > 0.0
+        return float(tilt @ (turned / way if seen_way else self.level_axis))
 
     def _turn_stalled(self, pusher_turned: float, turned: float) -> bool:
         """Has the pusher turned `turn_stall` on since the object last gained TURN_GAIN with it? Then it
@@ -1711,14 +1768,32 @@ class PlanExecutor:
         return None
 
     def _slip(self, obs: Observation) -> tuple[Outcome, str] | None:
-        """A slip once `slip_poses` poses in a row show one: a single stray estimate is none."""
+        """A slip once `slip_poses` poses in a row show one: a single stray estimate is none. Nor is a held
+        reference that rests on one pose, where the poses in a row agree with each other: that pose was the
+        stray one, and the grip's reference is taken again (sim, box: the first pose after a blind push 5.3 mm
+        and 5.0 deg off, 0.75 mm sure of itself, then good poses 0.3-0.5 mm off read as a slip)."""
         fault = self._slip_in(obs)
         if fault is None:
-            self.slip_poses = 0
+            self.slip_poses, self.slip_streak = 0, []
             return None
         if obs.object_time != self.slip_pose_time:
             self.slip_poses, self.slip_pose_time = self.slip_poses + 1, obs.object_time
-        return fault if self.slip_poses >= self.settings.slip_poses else None
+            self.slip_streak.append(obs.object_in_holder.copy())
+        if self.slip_poses < self.settings.slip_poses:
+            return None
+        if self.held_reference is not None and len(self.held_poses) == 1 and self._agree(self.slip_streak):
+            self.notes.append(f"the pose the grip's reference was taken from disagreed with the {self.slip_poses} "
+                              f"after it, which agree: a stray pose, the reference taken again ({fault[1]})")
+            self._hold(obs)
+            self.slip_poses, self.slip_streak = 0, []
+            return None
+        return fault
+
+    def _agree(self, poses: list[np.ndarray]) -> bool:
+        """Are these object poses each within the slip limits of the last?"""
+        s = self.settings
+        return all(moved <= s.slip_distance and turned <= s.slip_angle
+                   for moved, turned in (distance(pose, poses[-1]) for pose in poses[:-1]))
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of

@@ -1297,6 +1297,70 @@ def test_a_held_objects_pose_is_the_mean_of_the_certain_poses_seen_since_the_gri
         assert abs(errors[-1] - errors[1]) < 0.0005    # errors[1]: the mean of one pose either way
 
 
+@pytest.mark.parametrize("certain_elsewhere", [True, False])
+def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_was_not(
+        loop_parts, box_surface, certain_elsewhere):
+    """From the box's first push on, the camera's poses are made 3 mm uncertain - while the executor is not
+    looking for a certain one (found elsewhere), or throughout (none found): before it judges the last
+    primitive it looks for one, and where no place gives one it judges from the uncertain pose and says so,
+    never taking a seen object for lost."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import Outcome
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    certain = np.diag([0.0002, 0.0002, 0.0002, 0.002, 0.002, 0.002]) ** 2
+    uncertain = np.diag([0.003, 0.003, 0.003, 0.002, 0.002, 0.002]) ** 2
+    sought, pushed, ends = False, False, cell.time + 150.0
+    while not executor.done and cell.time < ends:
+        loop.perceive()
+        observation = loop.observe()
+        looking_elsewhere = certain_elsewhere and executor.seeking_certain
+        pushed = pushed or executor.step.name == "EXECUTE"
+        covariance = uncertain if pushed and not looking_elsewhere else certain
+        loop.apply(executor.update(replace(observation, object_covariance=covariance)))
+        sought = sought or executor.seeking_certain
+        cell.run(loop.control_period)
+    result = executor.result
+    assert result is not None and sought, result
+    assert result.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), result.message
+    judged_uncertain = "judged from a pose uncertain by 3.0 mm" in result.message
+    assert judged_uncertain != certain_elsewhere, result.message
+
+
+def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_poses_after_it_agree(
+        loop_parts, box_surface):
+    """The box held still: the pose the grip's reference is taken from (as the first push's approach begins)
+    is 6 mm off and sure of itself, the poses after it are the camera's own and agree with each other - no
+    SLIP, a note, and the reference is the object's pose again."""
+    from dataclasses import replace
+
+    from dmg_planner.transforms import distance
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    certain = np.diag([0.0002, 0.0002, 0.0002, 0.002, 0.002, 0.002]) ** 2
+
+    def tick(offset: float) -> None:
+        loop.perceive()
+        observation = loop.observe()
+        seen = observation.object_in_holder.copy()
+        seen[:3, 3] += [0.0, offset, 0.0]
+        loop.apply(executor.update(replace(observation, object_in_holder=seen, object_time=observation.time,
+                                           object_covariance=certain)))
+        cell.run(loop.control_period)
+
+    while executor.step.name != "APPROACH" and not executor.done:
+        tick(0.006)
+    assert len(executor.held_poses) == 1
+    for _ in range(3 * executor.settings.slip_poses):
+        tick(0.0)
+    assert not executor.done, executor.result
+    assert any("a stray pose, the reference taken again" in note for note in executor.notes), executor.notes
+    assert distance(executor.held_reference, cell.object_in_gripper("arm1"))[0] < 0.001
+
+
 def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_tilt(loop_parts, box_surface):
     from dataclasses import replace
 
