@@ -414,8 +414,7 @@ class PlanExecutor:
         self.error_before_push = math.inf   # the current primitive's error when its last push was planned
         self.settled = False            # near the goal, and pushes make no headway: no more of them
         self.headway: _Headway | None = None
-        self.slip_poses = 0                 # consecutive fresh poses that each showed a slip
-        self.slip_streak: list[np.ndarray] = []   # ... those poses (holder frame)
+        self.slip_streak: list[np.ndarray] = []   # consecutive fresh poses (holder frame) that each showed a slip
         self.slip_pose_time = -math.inf
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
@@ -506,8 +505,8 @@ class PlanExecutor:
         # Poses from images taken while the holder turns are not trusted, nor those with the object
         # turned away unless they are certain (the object seen edge-on or from its back: measured
         # 7-10 mm off); the held pose is known.
-        trusted = self.holder_turn is None and (not self.far_side or self._certain(obs))
-        fresh = trusted and obs.time - obs.object_time <= s.stale_after
+        trusted = self._trusted(obs)
+        fresh = self._fresh(obs)
         self.searching = self.searching and not (fresh and (not self.seeking_certain or self._certain(obs)))
         self.seeking_certain = self.seeking_certain and self.searching
         if self._pushing() and s.blind_pushes:
@@ -537,7 +536,7 @@ class PlanExecutor:
         fault = self._limits(obs) or (self._slip(obs) if trusted else None)
         if fault:
             return self._abort(*fault)
-        if fresh and self.reckoned is None and self.slip_poses == 0:
+        if fresh and self.reckoned is None and not self.slip_streak:
             self._average_held(obs)
         if self.reckoned is not None:
             obs = replace(obs, object_in_holder=self.reckoned)    # pushed, not seen since: where it went
@@ -618,10 +617,18 @@ class PlanExecutor:
         a level press took the difference for the object turning back and stopped closing its gap) - else
         the held reference (a blind push)."""
         seen = self.last
-        if (seen.object_in_holder is not None and seen.time - seen.object_time <= self.settings.stale_after
-                and self.holder_turn is None and self._certain(seen)):
+        if seen.object_in_holder is not None and self._fresh(seen) and self._certain(seen):
             return seen.object_in_holder.copy()
         return obs.object_in_holder.copy()
+
+    def _trusted(self, obs: Observation) -> bool:
+        """Is this pose from an image worth trusting: not taken while the holder turns, nor of the object
+        turned away unless certain?"""
+        return self.holder_turn is None and (not self.far_side or self._certain(obs))
+
+    def _fresh(self, obs: Observation) -> bool:
+        """A trusted pose no older than `stale_after`."""
+        return self._trusted(obs) and obs.time - obs.object_time <= self.settings.stale_after
 
     def _held_better_than(self, obs: Observation) -> bool:
         """Is the held reference (a pose certain of its position, the grip closed since) a better account
@@ -1774,18 +1781,18 @@ class PlanExecutor:
         and 5.0 deg off, 0.75 mm sure of itself, then good poses 0.3-0.5 mm off read as a slip)."""
         fault = self._slip_in(obs)
         if fault is None:
-            self.slip_poses, self.slip_streak = 0, []
+            self.slip_streak = []
             return None
         if obs.object_time != self.slip_pose_time:
-            self.slip_poses, self.slip_pose_time = self.slip_poses + 1, obs.object_time
+            self.slip_pose_time = obs.object_time
             self.slip_streak.append(obs.object_in_holder.copy())
-        if self.slip_poses < self.settings.slip_poses:
+        if len(self.slip_streak) < self.settings.slip_poses:
             return None
         if self.held_reference is not None and len(self.held_poses) == 1 and self._agree(self.slip_streak):
-            self.notes.append(f"the pose the grip's reference was taken from disagreed with the {self.slip_poses} "
+            self.notes.append(f"the pose the grip's reference was taken from disagreed with the {len(self.slip_streak)} "
                               f"after it, which agree: a stray pose, the reference taken again ({fault[1]})")
             self._hold(obs)
-            self.slip_poses, self.slip_streak = 0, []
+            self.slip_streak = []
             return None
         return fault
 
