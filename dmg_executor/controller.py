@@ -263,6 +263,11 @@ def _rotation_about_axis(rotation: np.ndarray) -> float:
     return float(Rotation.from_matrix(rotation).as_rotvec()[0])
 
 
+def _mean_pose(poses: np.ndarray) -> np.ndarray:
+    """The mean of (n, 4, 4) poses of one still object: mean rotation, mean position."""
+    return from_rotation(Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix(), poses[:, :3, 3].mean(axis=0))
+
+
 def _torque_axis(middle: np.ndarray, push: PushPoint) -> np.ndarray:
     """Unit axis through `middle` that a push at `push` turns the object about (object frame)."""
     axis = np.cross(push.point - middle, push.direction)
@@ -591,9 +596,7 @@ class PlanExecutor:
             return
         self.held_poses.append(obs.object_in_holder.copy())
         self.held_pose_time = obs.object_time
-        poses = np.array(self.held_poses)
-        self.held_reference = from_rotation(Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix(),
-                                            poses[:, :3, 3].mean(axis=0))
+        self.held_reference = _mean_pose(np.array(self.held_poses))
 
     def _pushing(self) -> bool:
         return self.step == Step.EXECUTE and self.phase in ("touch", "push")
@@ -1278,8 +1281,7 @@ class PlanExecutor:
         sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
         if len(poses) < 2 or sigma > self.settings.slip_position_sigma:
             return False
-        self.held_reference = from_rotation(Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix(),
-                                            poses[:, :3, 3].mean(axis=0))
+        self.held_reference = _mean_pose(poses)
         self.held_sigma, self.held_poses, self.held_pose_time = sigma, [self.held_reference], seen.object_time
         self.searching = self.seeking_certain = False
         self.notes.append(f"primitive {self.index} judged from the mean of {len(poses)} poses seen from as many "
