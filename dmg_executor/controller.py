@@ -447,6 +447,7 @@ class PlanExecutor:
         self.turned_by = 0.0            # rad the holder turned the object about its fingers (to turn back by)
         self.far_side = False           # the holder turned: the pusher faces the side it could not reach
         self.far_side_pushed = False    # ... and has pushed there: turn back to look
+        self.pressed_turned = False     # a level press was seen made since the holder last turned
         self.may_turn = True            # false once a turn stopped short (the wrist at a limit)
         self.may_return = True          # false once the holder could not go back to where it started
         self.unseen_from = -math.inf    # being unseen counts from here (turns, blind pushes: expected)
@@ -658,6 +659,9 @@ class PlanExecutor:
             return self._look_around(obs)     # plan the next push from a fresh pose
         self.looking = None
         while self.index < len(self.primitives) and self._primitive_finished(obs):
+            if self._leveling and self.far_side:    # presses seen from the turned holder: judged once turned back
+                self.far_side_pushed = True
+                return Command()
             if self.index == len(self.primitives) - 1 and self._end_uncertain():
                 self.sought_certain = self.seeking_certain = self.searching = True
                 return self._look_around(obs)
@@ -672,6 +676,9 @@ class PlanExecutor:
             self.push = self._plan_push(primitive, obs)
             self.error_before_push = self._error_and_tolerance(obs)[0]
         except (PushError, RouteError) as error:
+            if self._leveling and self.pressed_turned:   # the next press another way: turn back, plan from there
+                self.far_side_pushed = True
+                return Command()
             turn = self._level_turn(obs)
             if turn is not None:
                 return self._start_holder_turn(obs, back=False, angle=turn)
@@ -769,7 +776,7 @@ class PlanExecutor:
             angle = self.settings.holder_turn if angle is None else angle
             self.turned_by = angle
         self.holder_turn = _HolderTurn(angle, back, None if home is None else home.copy())
-        self.far_side_pushed = False
+        self.far_side_pushed = self.pressed_turned = False
         if home is not None:
             offset, turned = distance(self.holder_start, obs.holder)
             self.notes.append(f"primitive {self.index}: the holding gripper went back to where it started (it had "
@@ -1402,7 +1409,9 @@ class PlanExecutor:
             if obs.time < self.grip_until:
                 return Command(holder_grip=self._held() if self._leveling else self._loosened(obs))
             self.phase, self.held_reference = "push", None
-            self.far_side_pushed = self.far_side
+            # A level press the camera sees needs no turn back to be judged: the next is planned as the holder stands.
+            self.pressed_turned = self.far_side and self._leveling and not self.push.blind
+            self.far_side_pushed = self.far_side and not self.pressed_turned
             self.pushed_reference = self._push_reference(obs)
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None

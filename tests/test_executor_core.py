@@ -982,8 +982,8 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
 def bracket_run(loop_parts):
     """Makes executors for the bracket's default grasp moved by `shift` (gripper 1's frame), by default
     15 mm along its -y: the bracket must move 15 mm towards the pusher, pushed on its far side, 60 mm
-    beyond the grasp; the bracket held `tilt_deg` about gripper 1's finger axis off the grasp the plan
-    starts from (on loop_parts' cell)."""
+    beyond the grasp; the bracket held `tilt_deg` about `tilt_axis` (gripper 1's frame, by default its
+    finger axis) off the grasp the plan starts from (on loop_parts' cell)."""
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
@@ -1004,11 +1004,12 @@ def bracket_run(loop_parts):
     loop = ClosedLoop(cell, ObjectPoseEstimator([model]))
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
 
-    def make(shift=(0.0, -0.015, 0.0), tilt_deg: float = 0.0, **overrides) -> PlanExecutor:
+    def make(shift=(0.0, -0.015, 0.0), tilt_deg: float = 0.0, tilt_axis=(0.0, 0.0, 1.0), **overrides) -> PlanExecutor:
         start = invert(cell.reset("bracket", restart_clock=True).object_in_gripper)   # as run alone, whatever ran before
         if tilt_deg:
             held = start.copy()
-            held[:3, :3] = start[:3, :3] @ Rotation.from_rotvec(np.deg2rad([0.0, 0.0, tilt_deg])).as_matrix()
+            axis = np.asarray(tilt_axis) / np.linalg.norm(tilt_axis)
+            held[:3, :3] = start[:3, :3] @ Rotation.from_rotvec(np.deg2rad(tilt_deg) * axis).as_matrix()
             cell.reset("bracket", object_in_gripper=invert(held), restart_clock=True)
         goal = start.copy()
         goal[:3, 3] += start[:3, :3] @ np.asarray(shift)
@@ -1149,6 +1150,40 @@ def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the
     tilt = float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
     assert turned and pressed, outcome
     assert outcome is not None and outcome.outcome == Outcome.OK and tilt < 1.0, (outcome, tilt)
+
+
+def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back_between_them(bracket_run):
+    """The bracket held 4 deg off its grasp about an axis between gripper 1's y and z, moved 5 mm along the
+    fingers: levelling it takes more than one press, each with the holder turned so the pusher reaches the
+    face. A press the camera saw made is judged, and the next planned, as the holder stands; it turns back
+    once, when the bracket is level or the next press needs the holder as it was (before: it turned back
+    after every press to judge it and turned again for the next, and ran out of time at 150 s)."""
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import invert
+
+    cell, loop, make = bracket_run
+    executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=4.0, tilt_axis=(0.0, 0.92, 0.38))
+    events, turning, pressing, ends = [], False, False, cell.time + 150
+    while not executor.done and cell.time < ends:
+        loop.perceive()
+        loop.apply(executor.update(loop.observe()))
+        cell.run(loop.control_period)
+        if executor.index != executor.level_index:
+            continue
+        now_turning = executor.holder_turn is not None
+        now_pressing = executor.step.name == "EXECUTE" and executor.phase == "push"
+        if now_turning and not turning:
+            events.append("back" if executor.holder_turn.back else "turn")
+        if now_pressing and not pressing:
+            events.append("press, turned" if executor.far_side else "press")
+        turning, pressing = now_turning, now_pressing
+    outcome = executor.result
+    reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
+    tilt = float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+    assert outcome is not None and outcome.outcome == Outcome.OK and tilt < 1.0, (outcome, tilt, events)
+    pairs = list(zip(events, events[1:]))
+    assert ("press, turned", "press, turned") in pairs, events      # two presses from one turn of the holder
+    assert events.count("turn") < events.count("press, turned"), events
 
 
 def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
