@@ -274,6 +274,16 @@ def _torque_axis(middle: np.ndarray, push: PushPoint) -> np.ndarray:
     return axis / max(float(np.linalg.norm(axis)), 1e-12)
 
 
+def _best_level_press(candidates: list[tuple[_Push, int]], middle: np.ndarray, axis: np.ndarray,
+                      reach: np.ndarray) -> _Push:
+    """Of level presses (with how many tags the camera sees from each start): seen first, then the one
+    turning the object most nearly about the tilt's `axis` (object frame; sim, bracket: a press 30 deg off
+    it, taken for the way it ran, turned 0.3-0.9 deg of 4.6), then the one running most nearly along
+    `reach` (base frame: the way the pusher's fingers point)."""
+    return max(candidates, key=lambda c: (c[1] > 0, round(float(_torque_axis(middle, c[0].contact) @ axis), 2),
+                                          float(c[0].direction @ reach)))[0]
+
+
 def _slid_since(reference: np.ndarray, now: np.ndarray) -> float:
     """How far [m] the grasp's middle moved on the object from pose `reference` to `now` (holder frame);
     a turn about the grasp axis moves it not at all."""
@@ -1024,11 +1034,7 @@ class PlanExecutor:
         candidates = [c for c in candidates if float(c[0].direction @ reach) > LEVEL_REACH_COSINE]
         if not candidates:
             raise PushError("no level push runs the way the pusher's fingers point where it started")
-        # Seen first, then the one turning the object most nearly about the tilt's axis (sim, bracket: a press
-        # 30 deg off it, taken for the way it ran, turned 0.3-0.9 deg of 4.6), then the way the fingers point.
-        axis = rotation @ self.level_axis
-        return max(candidates, key=lambda c: (c[1] > 0, round(float(_torque_axis(middle, c[0].contact) @ axis), 2),
-                                              float(c[0].direction @ reach)))[0]
+        return _best_level_press(candidates, middle, rotation @ self.level_axis, reach)
 
     def _rotation_pushes(self, obs: Observation, directions: np.ndarray, angle: float, problems: list[str]) -> list[PushPoint]:
         """Push points turning the object by `angle` about x, pushed along `directions` (holder frame),
