@@ -1193,9 +1193,12 @@ class PlanExecutor:
 
     def _approach(self, obs: Observation) -> Command:
         command = self._along_route(obs)
-        if not self._arrived(obs) and self._stalled(obs):
-            return self._give_up_push(obs)
-        if self._arrived(obs):
+        arrived = self._arrived(obs)
+        if not arrived and self._stalled(obs):
+            if not self._there_but_turned(obs):
+                return self._give_up_push(obs)
+            arrived = True
+        if arrived:
             if self.push.homeward and self.waypoint == len(self.push.waypoints) - 1:
                 self._enter(Step.FIND_CONTACT, obs)
                 return Command()
@@ -1696,6 +1699,15 @@ class PlanExecutor:
         last = self.waypoint == len(self.push.waypoints) - 1   # where a push starts: on its line, precisely
         tolerance = self.settings.position_tolerance if last else self.settings.waypoint_tolerance
         return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE
+
+    def _there_but_turned(self, obs: Observation) -> bool:
+        """Is the pusher at a waypoint on the way, only not turned as wanted there? That turn is a view
+        of the object on the way, not needed to go on (sim, bracket: two wrist joints 1 deg from their
+        limits 1 mm from the waypoint; the push was given up after `stall_time`, gripper 1 sent back
+        and turned for another, and the run ran out of time)."""
+        on_the_way = self.waypoint < len(self.push.waypoints) - 1
+        return on_the_way and float(np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])) < \
+            self.settings.waypoint_tolerance
 
     def _along_route(self, obs: Observation) -> Command:
         """Towards the current waypoint of the pusher's route: through the ones on the way, onto the last."""

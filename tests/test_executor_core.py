@@ -944,6 +944,36 @@ def test_dead_reckoning_moves_the_object_along_the_push_only_once_the_gap_is_clo
         np.testing.assert_allclose(believed[:3, :3], known[:3, :3], atol=1e-12)
 
 
+def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(loop_parts, box_surface):
+    """On the way to the push start the pusher turns its camera to the object at each waypoint; a wrist
+    that cannot turn (its command's turn zeroed there: joints at their limits) leaves it at the waypoint
+    turned otherwise. That view is not needed to go on: it passes the waypoint after `stall_time` and
+    the push is made (without the rule the push was given up, never again that way)."""
+    from dmg_executor.controller import WAYPOINT_TURN_TOLERANCE, Outcome
+    from dmg_planner.transforms import turn_between
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    passed_turned, ends = [], cell.time + 60
+    while not executor.done and cell.time < ends:
+        loop.perceive()
+        observation = loop.observe()
+        before = executor.waypoint if executor.step.name == "APPROACH" else None
+        command = executor.update(observation)
+        on_the_way = (executor.step.name == "APPROACH" and executor.push is not None and not executor.push.homeward
+                      and executor.waypoint < len(executor.push.waypoints) - 1)
+        if on_the_way:
+            command.pusher[3:] = 0.0                 # fault: the wrist does not turn on the way
+        if before is not None and executor.step.name == "APPROACH" and executor.waypoint == before + 1:
+            passed_turned.append(turn_between(executor.push.orientations[before], observation.pusher[:3, :3]))
+        loop.apply(command)
+        cell.run(loop.control_period)
+    outcome = executor.result
+    assert outcome is not None and outcome.outcome == Outcome.OK, outcome
+    assert "given up" not in outcome.message, outcome.message
+    assert passed_turned and max(passed_turned) > WAYPOINT_TURN_TOLERANCE, passed_turned   # passed unturned
+
+
 def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_home(loop_parts, box_surface):
     from dmg_executor.controller import Outcome
 
