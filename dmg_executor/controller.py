@@ -1703,8 +1703,8 @@ class PlanExecutor:
     def _there_but_turned(self, obs: Observation) -> bool:
         """Is the pusher at a waypoint on the way, only not turned as wanted there? That turn is a view
         of the object on the way, not needed to go on (sim, bracket: two wrist joints 1 deg from their
-        limits 1 mm from the waypoint; the push was given up after `stall_time`, gripper 1 sent back
-        and turned for another, and the run ran out of time)."""
+        limits 1 mm from the waypoint; the push was given up after `stall_time`, and gripper 1 sent back
+        and turned half round for another)."""
         on_the_way = self.waypoint < len(self.push.waypoints) - 1
         return on_the_way and float(np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])) < \
             self.settings.waypoint_tolerance
