@@ -812,7 +812,7 @@ class PlanExecutor:
             stalled = self._stalled(obs)
             if not (self._arrived(obs) or stalled):
                 return self._along_route(obs)
-            if not stalled and self.waypoint < len(self.push.waypoints) - 1:
+            if not stalled and self._on_the_way:
                 self.waypoint += 1
                 return Command()
             if not self._clear_of_turn(obs, obs.pusher[:3, 3]):
@@ -1199,10 +1199,10 @@ class PlanExecutor:
                 return self._give_up_push(obs)
             arrived = True
         if arrived:
-            if self.push.homeward and self.waypoint == len(self.push.waypoints) - 1:
+            if self.push.homeward and not self._on_the_way:
                 self._enter(Step.FIND_CONTACT, obs)
                 return Command()
-            if self.waypoint == len(self.push.waypoints) - 1 and obs.time - obs.object_time > self.settings.stale_after:
+            if not self._on_the_way and obs.time - obs.object_time > self.settings.stale_after:
                 waiting = self._look_again(obs)     # at the push start: a fresh pose first, if any view gives one
                 if waiting is not None:
                     return waiting
@@ -1226,7 +1226,7 @@ class PlanExecutor:
         if self.push.homeward:
             self._enter(Step.FIND_CONTACT, obs)      # not home, but as close as it gets: plan from here
             return Command()
-        if self.waypoint == len(self.push.waypoints) - 1 and self.push.other_views:
+        if not self._on_the_way and self.push.other_views:
             self._next_start_view()
             return Command()
         self.unreachable.append(self.push.direction)
@@ -1258,7 +1258,7 @@ class PlanExecutor:
         look = self.looking
         self.unseen_from = obs.time
         if look.travelling:
-            if self._arrived(obs) and self.waypoint < len(self.push.waypoints) - 1:
+            if self._arrived(obs) and self._on_the_way:
                 self.waypoint += 1
             elif self._arrived(obs) or self._stalled(obs):     # (an arm at a limit: looks from where it got to)
                 look.travelling, look.place = False, obs.pusher[:3, 3].copy()
@@ -1696,23 +1696,27 @@ class PlanExecutor:
         """The pusher is at the current waypoint, turned as wanted there."""
         offset = np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])
         turn = turn_between(self.push.orientations[self.waypoint], obs.pusher[:3, :3])
-        last = self.waypoint == len(self.push.waypoints) - 1   # where a push starts: on its line, precisely
-        tolerance = self.settings.position_tolerance if last else self.settings.waypoint_tolerance
+        # (where a push starts: on its line, precisely)
+        tolerance = self.settings.waypoint_tolerance if self._on_the_way else self.settings.position_tolerance
         return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE
+
+    @property
+    def _on_the_way(self) -> bool:
+        """Is the pusher's current waypoint one on the way (not the last of its route)?"""
+        return self.waypoint < len(self.push.waypoints) - 1
 
     def _there_but_turned(self, obs: Observation) -> bool:
         """Is the pusher at a waypoint on the way, only not turned as wanted there? That turn is a view
         of the object on the way, not needed to go on (sim, bracket: two wrist joints 1 deg from their
         limits 1 mm from the waypoint; the push was given up after `stall_time`, and gripper 1 sent back
         and turned half round for another)."""
-        on_the_way = self.waypoint < len(self.push.waypoints) - 1
-        return on_the_way and float(np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])) < \
+        return self._on_the_way and float(np.linalg.norm(self.push.waypoints[self.waypoint] - obs.pusher[:3, 3])) < \
             self.settings.waypoint_tolerance
 
     def _along_route(self, obs: Observation) -> Command:
         """Towards the current waypoint of the pusher's route: through the ones on the way, onto the last."""
-        through = self.waypoint < len(self.push.waypoints) - 1
-        return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint], through)
+        return self._go_to(obs, self.push.waypoints[self.waypoint], self.push.orientations[self.waypoint],
+                           self._on_the_way)
 
     def _go_to(self, obs: Observation, target: np.ndarray, orientation: np.ndarray | None = None,
                through: bool = False) -> Command:

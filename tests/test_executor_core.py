@@ -1008,6 +1008,14 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
+def _grasp_axis_tilt_deg(cell, executor) -> float:
+    """How far [deg] gripper 1's grasp axis on the object (ground truth) is tilted off the goal grasp's."""
+    from dmg_planner.transforms import invert
+
+    reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
+    return float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+
+
 @pytest.fixture(scope="module")
 def bracket_run(loop_parts):
     """Makes executors for the bracket's default grasp moved by `shift` (gripper 1's frame), by default
@@ -1125,10 +1133,7 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     from dmg_planner.transforms import distance, invert
 
     cell, loop, make = bracket_run
-
-    def tilt(executor) -> float:
-        reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
-        return float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+    tilt = lambda executor: _grasp_axis_tilt_deg(cell, executor)   # noqa: E731
 
     unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, level_tilt_deg=0.0)
     outcome = loop.run(unleveled, time_limit=150)
@@ -1176,8 +1181,7 @@ def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the
         pressed = pressed or (executor.index == executor.level_index and executor.step.name == "EXECUTE")
         cell.run(loop.control_period)
     outcome = executor.result
-    reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
-    tilt = float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+    tilt = _grasp_axis_tilt_deg(cell, executor)
     assert turned and pressed, outcome
     assert outcome is not None and outcome.outcome == Outcome.OK and tilt < 1.0, (outcome, tilt)
 
@@ -1189,7 +1193,6 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
     once, when the bracket is level or the next press needs the holder as it was (before: it turned back
     after every press to judge it and turned again for the next, and ran out of time at 150 s)."""
     from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import invert
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=4.0, tilt_axis=(0.0, 0.92, 0.38))
@@ -1208,8 +1211,7 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
             events.append("press, turned" if executor.far_side else "press")
         turning, pressing = now_turning, now_pressing
     outcome = executor.result
-    reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
-    tilt = float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
+    tilt = _grasp_axis_tilt_deg(cell, executor)
     assert outcome is not None and outcome.outcome == Outcome.OK and tilt < 1.0, (outcome, tilt, events)
     pairs = list(zip(events, events[1:]))
     assert ("press, turned", "press, turned") in pairs, events      # two presses from one turn of the holder
