@@ -79,6 +79,10 @@ LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands)
 VIEW_SHORT = np.deg2rad(20.0)
 TIP_RIMS = np.deg2rad([0.0, 30.0, 60.0, 80.0])   # fingertip sphere points off the push direction ...
 TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, that may meet the object first
+# Where a push starts the fingertips keep this clear of the object all round (less than `gap`: ahead they are that far
+# from it). A tip grazing a face along the push line there (sim, plug: 7 N on a prong's side as the grip loosened
+# for a level press) shoves the object before the push and may leave the face out of the push's reach.
+TIP_CLEARANCE = 0.002
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 # After the plan, a grasp outside the goal's angle tolerance with its axis tilted more than `level_tilt` off the
 # goal's is pressed back about an axis across it (the object rolling on gripper 1's fingertips, the grip held),
@@ -354,6 +358,15 @@ def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius:
               + np.sin(tilt).reshape(-1, 1) * (np.cos(turn).reshape(-1, 1) * side + np.sin(turn).reshape(-1, 1) * other))
     centres = tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
     return (centres[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
+
+
+def fingertip_shells(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) TIP_CLEARANCE out from both
+    fingertips' spheres, all round them: where a push starts, none may be inside the object."""
+    grid = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
+    out = (tip_radius + TIP_CLEARANCE) * grid / np.linalg.norm(grid, axis=1, keepdims=True)
+    centres = tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
+    return (centres[:, None, :] + out[None]).reshape(-1, 3)
 
 
 def meeting_start(start: np.ndarray, orientation: np.ndarray, direction: np.ndarray, object_pose: np.ndarray,
@@ -1142,15 +1155,24 @@ class PlanExecutor:
         # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
         views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
-        # The best view whose hand keeps clear of the holding gripper (usually the first).
-        normal = object_pose[:3, :3] @ push.normal
+        # The best view whose hand keeps clear of the holding gripper (usually the first) and whose
+        # fingertips start clear of the object: set back by the face's plane, a tip beside the face can be
+        # inside another part of it (sim, a stepped block: a tip in the step where a push along a slanted
+        # line started, met 13 mm before the start at 23 N on the way in, SLIP; the plug: a level press's
+        # approach met a prong 7 mm early), and its way in goes through that part.
+        normal, to_object = object_pose[:3, :3] @ push.normal, invert(object_pose)
+        clashes = 0
         for first, view in enumerate(views):
             start = push_start(point, normal, direction, view, s.tip_radius, s.gap)
-            if not self._hands_clash(start, view, occluders):
+            clash = self._hands_clash(start, view, occluders)
+            clashes += clash
+            if not clash and not self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius))).any():
                 break
         else:
-            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
-                             "would put the pusher's hand into the holding gripper however it is turned")
+            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would put "
+                             + ("the pusher's hand into the holding gripper" if clashes == len(views) else
+                                "the pusher's hand into the holding gripper or a fingertip into the object")
+                             + " however it is turned")
         views, seen = views[first:], seen[first:]
         start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap)
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
@@ -1633,11 +1655,19 @@ class PlanExecutor:
     def _route_to(self, obs: Observation, goal: np.ndarray, orientation: np.ndarray) -> None:
         """Route the pusher to `goal` (holder frame; a goal inside the space kept free moves just clear
         of it: a run that began next to the object ends there), turned to `orientation` there and
-        its camera on the object on the way (RouteError if there is no route)."""
+        its camera on the object on the way (RouteError if there is no route). A pusher inside that
+        space on a push's line (its start in a hollow of the object, the pusher on its way in) first
+        backs out along the line, the way it came (sim, a stepped block: stopped on that line, unseen,
+        44 mm inside the space, no route out - the run ended LIMIT_VIOLATION)."""
         box = self._keep_out(obs)
         start = apply(invert(obs.holder), obs.pusher[:3, 3])
         goal = box.nearest_outside(goal)
-        places = [apply(obs.holder, w) for w in route(start, goal, box, goal)]
+        back = []
+        along = self.push.local_direction if self.push is not None else np.zeros(3)
+        if box.contains(start)[0] and np.any(along):
+            start = start - (box.exit_distance(start, -along) + EXIT_MARGIN) * along
+            back = [apply(obs.holder, start)]
+        places = back + [apply(obs.holder, w) for w in route(start, goal, box, goal)]
         orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [orientation]
         self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
         self.waypoint = 0

@@ -68,6 +68,10 @@ class ObjectSurface:
         normal = answer["primitive_normals"].numpy()[0].astype(float)
         return origin + distance * direction, normal / np.linalg.norm(normal)
 
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """Which of `points` (n, 3; object frame) are inside the object."""
+        return self.scene.compute_occupancy(o3d.core.Tensor(np.asarray(points, np.float32))).numpy() > 0.5
+
     def travel(self, points: np.ndarray, direction: np.ndarray) -> float:
         """How far [m] `points` (n, 3; object frame, outside the object) move along `direction`
         before the first of them meets the object; inf if none does."""

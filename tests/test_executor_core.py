@@ -1021,7 +1021,7 @@ def bracket_run(loop_parts):
     """Makes executors for the bracket's default grasp moved by `shift` (gripper 1's frame), by default
     15 mm along its -y: the bracket must move 15 mm towards the pusher, pushed on its far side, 60 mm
     beyond the grasp; the bracket held `tilt_deg` about `tilt_axis` (gripper 1's frame, by default its
-    finger axis) off the grasp the plan starts from (on loop_parts' cell)."""
+    finger axis) off the grasp the plan starts from (on loop_parts' cell); not `seeing`: without a camera model."""
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
@@ -1042,7 +1042,8 @@ def bracket_run(loop_parts):
     loop = ClosedLoop(cell, ObjectPoseEstimator([model]))
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
 
-    def make(shift=(0.0, -0.015, 0.0), tilt_deg: float = 0.0, tilt_axis=(0.0, 0.0, 1.0), **overrides) -> PlanExecutor:
+    def make(shift=(0.0, -0.015, 0.0), tilt_deg: float = 0.0, tilt_axis=(0.0, 0.0, 1.0), seeing: bool = True,
+             **overrides) -> PlanExecutor:
         start = invert(cell.reset("bracket", restart_clock=True).object_in_gripper)   # as run alone, whatever ran before
         if tilt_deg:
             held = start.copy()
@@ -1053,7 +1054,8 @@ def bracket_run(loop_parts):
         goal[:3, 3] += start[:3, :3] @ np.asarray(shift)
         result = plan(graph, pose(start), pose(goal))
         executor = PlanExecutor(ExecutorSettings.defaults(**overrides), ObjectSurface.of(model), result.primitives,
-                                result.principal_finger, 1.0, cell.time, loop.camera_model(), TagLayout.of(model))
+                                result.principal_finger, 1.0, cell.time, loop.camera_model() if seeing else None,
+                                TagLayout.of(model))
         loop.watch(0.5)
         return executor
 
@@ -1092,6 +1094,78 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     assert np.rad2deg(turn_between(holder_after[:3, :3], holder_before[:3, :3])) < 3.0
     assert np.linalg.norm(holder_after[:3, 3] - holder_before[:3, 3]) < 0.01
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_came_in(bracket_run):
+    """The space kept free round the object is one box; a push into a hollow of the object (the bracket's
+    corner between plate and wall) starts deep inside it. A pusher stopped on that push's line (the
+    object unseen on its way in) has no straight way out of the box that misses the object: its route
+    anywhere first backs out along the line it came in on (before, RouteError: no route, the run ended)."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import _Push
+    from dmg_executor.routes import ESCAPE_DEPTH
+    from dmg_planner.transforms import apply, invert
+
+    cell, loop, make = bracket_run
+    executor = make()
+    loop.perceive()
+    observation = loop.observe()
+    executor.update(observation)        # (where the pusher started: its home)
+    object_pose = observation.holder @ observation.object_in_holder
+    # In the corner: 15 mm from the wall's inner face, 17 mm over the plate, halfway across; pushed down.
+    corner = apply(object_pose, np.array([0.037, 0.0, 0.025]))
+    down = object_pose[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    stopped = np.eye(4)
+    stopped[:3, :3], stopped[:3, 3] = observation.pusher[:3, :3], corner
+    observation = replace(observation, pusher=stopped)
+    box, local = executor._keep_out(observation), observation.holder[:3, :3].T @ down
+    inside = apply(invert(observation.holder), corner)
+    assert box.contains(inside)[0]
+    assert np.min(np.concatenate([inside - box.low, box.high - inside])) > ESCAPE_DEPTH     # too deep to just step out
+    executor.push = _Push(down, local, corner, [corner], [stopped[:3, :3]], 0.0)
+    executor._head_home(observation)
+    first = apply(invert(observation.holder), executor.push.waypoints[0])
+    assert not box.contains(first)[0]
+    backed = first - inside
+    assert np.linalg.norm(np.cross(backed, local)) < 1e-9 and float(backed @ local) < 0    # back up the line
+    home = executor._home_in(observation.holder)
+    assert np.linalg.norm(executor.push.waypoints[-1] - apply(observation.holder, box.nearest_outside(home))) < 1e-9
+
+
+def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_run):
+    """The bracket's wall pushed from its corner just above the plate, the pusher turned as it started
+    (without a camera model no other view is tried): its fingertips side by side along the wall's height,
+    set back from the wall's plane the lower one starts inside the plate - its way in goes through it.
+    That start is refused, saying so; higher up the wall, clear of the plate (TIP_CLEARANCE all round
+    both tips), the push is taken."""
+    from dmg_executor.controller import fingertip_shells, push_start
+    from dmg_executor.push_points import PushPoint
+    from dmg_executor.routes import RouteError
+    from dmg_executor.views import Occluders
+    from dmg_planner.transforms import apply, invert
+
+    cell, loop, make = bracket_run
+    executor = make(seeing=False)
+    loop.perceive()
+    observation = loop.observe()
+    executor.update(observation)
+    object_pose = observation.holder @ observation.object_in_holder
+    occluders = Occluders.of(executor.shape, observation.holder, observation.opening)
+    radius, home = executor.settings.tip_radius, executor.pusher_home[:3, :3]
+    normal, along = np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])      # the wall's inner face, pushed out
+
+    def tip_inside(start, view) -> bool:
+        return bool(executor.surface.inside(apply(invert(object_pose), start + fingertip_shells(view, radius))).any())
+
+    low = np.array([0.052, 0.0, 0.008 + radius + 0.001])                      # 1 mm more than a tip over the plate
+    start = push_start(apply(object_pose, low), object_pose[:3, :3] @ normal, object_pose[:3, :3] @ along, home,
+                       radius, executor.settings.gap)
+    assert tip_inside(start, home)
+    with pytest.raises(RouteError, match="a fingertip into the object"):
+        executor._push_from(observation, PushPoint(low, normal, along), occluders)
+    planned, _ = executor._push_from(observation, PushPoint(low + [0.0, 0.0, 0.02], normal, along), occluders)
+    assert not tip_inside(planned.start, planned.orientations[-1])
 
 
 def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket_run):
