@@ -1169,10 +1169,11 @@ class PlanExecutor:
             if not clash and not self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius))).any():
                 break
         else:
-            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would put "
-                             + ("the pusher's hand into the holding gripper" if clashes == len(views) else
-                                "the pusher's hand into the holding gripper or a fingertip into the object")
-                             + " however it is turned")
+            what = ("the pusher's hand into the holding gripper" if clashes == len(views) else
+                    "a fingertip into the object" if clashes == 0 else
+                    "the pusher's hand into the holding gripper or a fingertip into the object")
+            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would put {what} "
+                             "however it is turned")
         views, seen = views[first:], seen[first:]
         start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap)
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))

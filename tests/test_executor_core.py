@@ -1162,7 +1162,7 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     start = push_start(apply(object_pose, low), object_pose[:3, :3] @ normal, object_pose[:3, :3] @ along, home,
                        radius, executor.settings.gap)
     assert tip_inside(start, home)
-    with pytest.raises(RouteError, match="a fingertip into the object"):
+    with pytest.raises(RouteError, match="would put a fingertip into the object however it is turned"):
         executor._push_from(observation, PushPoint(low, normal, along), occluders)
     planned, _ = executor._push_from(observation, PushPoint(low + [0.0, 0.0, 0.02], normal, along), occluders)
     assert not tip_inside(planned.start, planned.orientations[-1])
