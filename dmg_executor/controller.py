@@ -800,6 +800,13 @@ class PlanExecutor:
             self.turned_by = angle
         self.holder_turn = _HolderTurn(angle, back, None if home is None else home.copy())
         self.far_side_pushed = self.pressed_turned = False
+        try:
+            self._head_home(obs, clear_of_turn=True)
+        except RouteError as error:
+            if back:
+                return self._abort(Outcome.LIMIT_VIOLATION, f"cannot clear the pusher from the object before the "
+                                   f"holding gripper turns it back: {error}")
+            return self._forgo_turn(obs, f"no route takes the pusher out of its reach ({error})")
         if home is not None:
             offset, turned = distance(self.holder_start, obs.holder)
             self.notes.append(f"primitive {self.index}: the holding gripper went back to where it started (it had "
@@ -809,11 +816,19 @@ class PlanExecutor:
             self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
                               f"{np.rad2deg(angle):.0f} deg about its fingers for "
                               f"{'a level press' if self._leveling else 'a push on its far side'}")
-        try:
-            self._head_home(obs, clear_of_turn=True)
-        except RouteError as error:
-            return self._abort(Outcome.LIMIT_VIOLATION, f"cannot clear the pusher from the object before the holding "
-                               f"gripper turns it: {error}")
+        self._enter(Step.FIND_CONTACT, obs)
+        return Command()
+
+    def _forgo_turn(self, obs: Observation, why: str) -> Command:
+        """Nothing turned yet: the holder's turn (or its way back to where it started) is given up like a push
+        the pusher cannot get to, and not tried again; the run goes on without it."""
+        turn = self.holder_turn
+        self.notes.append(f"the holding gripper did not {'go back' if turn.home is not None else 'turn the object'}: {why}")
+        self.holder_turn = None
+        if turn.home is not None:
+            self.may_return = False
+        else:
+            self.may_turn = False
         self._enter(Step.FIND_CONTACT, obs)
         return Command()
 
@@ -832,16 +847,7 @@ class PlanExecutor:
                 if turn.back:
                     return self._abort(Outcome.LIMIT_VIOLATION, "the pusher cannot get out of reach of the object "
                                        "the holding gripper must turn back")
-                # Nothing turned yet: that push is given up like any other the pusher cannot get to.
-                self.notes.append(f"the holding gripper did not {'go back' if turn.home is not None else 'turn the object'}: "
-                                  "the pusher could not get out of its reach")
-                self.holder_turn = None
-                if turn.home is not None:
-                    self.may_return = False
-                else:
-                    self.may_turn = False
-                self._enter(Step.FIND_CONTACT, obs)
-                return Command()
+                return self._forgo_turn(obs, "the pusher could not get out of its reach")
             turn.clearing, turn.place, turn.last = False, obs.holder[:3, 3].copy(), obs.holder[:3, :3].copy()
             turn.progress = (math.inf if turn.home is not None else 0.0, obs.time)   # (turned or left, when)
             # The grip is closed: the object stays where it was seen; the next reference is the first

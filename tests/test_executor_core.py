@@ -1096,14 +1096,12 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
-def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_came_in(bracket_run):
-    """The space kept free round the object is one box; a push into a hollow of the object (the bracket's
-    corner between plate and wall) starts deep inside it. A pusher stopped on that push's line (the
-    object unseen on its way in) has no straight way out of the box that misses the object: its route
-    anywhere first backs out along the line it came in on (before, RouteError: no route, the run ended)."""
+def _pusher_in_the_bracket_corner(bracket_run):
+    """An executor for the bracket and an observation with its pusher stopped in the bracket's corner (between
+    plate and wall: 15 mm from the wall's inner face, 17 mm over the plate, halfway across), deeper inside the
+    keep-out box than ESCAPE_DEPTH; and the way down onto the plate there (holder frame)."""
     from dataclasses import replace
 
-    from dmg_executor.controller import _Push
     from dmg_executor.routes import ESCAPE_DEPTH
     from dmg_planner.transforms import apply, invert
 
@@ -1113,24 +1111,52 @@ def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_cam
     observation = loop.observe()
     executor.update(observation)        # (where the pusher started: its home)
     object_pose = observation.holder @ observation.object_in_holder
-    # In the corner: 15 mm from the wall's inner face, 17 mm over the plate, halfway across; pushed down.
-    corner = apply(object_pose, np.array([0.037, 0.0, 0.025]))
-    down = object_pose[:3, :3] @ np.array([0.0, 0.0, -1.0])
-    stopped = np.eye(4)
-    stopped[:3, :3], stopped[:3, 3] = observation.pusher[:3, :3], corner
+    stopped = observation.pusher.copy()
+    stopped[:3, 3] = apply(object_pose, np.array([0.037, 0.0, 0.025]))
     observation = replace(observation, pusher=stopped)
-    box, local = executor._keep_out(observation), observation.holder[:3, :3].T @ down
-    inside = apply(invert(observation.holder), corner)
+    box = executor._keep_out(observation)
+    inside = apply(invert(observation.holder), stopped[:3, 3])
     assert box.contains(inside)[0]
     assert np.min(np.concatenate([inside - box.low, box.high - inside])) > ESCAPE_DEPTH     # too deep to just step out
-    executor.push = _Push(down, local, corner, [corner], [stopped[:3, :3]], 0.0)
+    down = observation.holder[:3, :3].T @ object_pose[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    return executor, observation, down
+
+
+def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_came_in(bracket_run):
+    """The space kept free round the object is one box; a push into a hollow of the object (the bracket's
+    corner between plate and wall) starts deep inside it. A pusher stopped on that push's line (the
+    object unseen on its way in) has no straight way out of the box that misses the object: its route
+    anywhere first backs out along the line it came in on (before, RouteError: no route, the run ended)."""
+    from dmg_executor.controller import _Push
+    from dmg_planner.transforms import apply, invert
+
+    executor, observation, down = _pusher_in_the_bracket_corner(bracket_run)
+    corner, to_holder = observation.pusher[:3, 3], invert(observation.holder)
+    executor.push = _Push(observation.holder[:3, :3] @ down, down, corner, [corner], [observation.pusher[:3, :3]], 0.0)
     executor._head_home(observation)
-    first = apply(invert(observation.holder), executor.push.waypoints[0])
+    box = executor._keep_out(observation)
+    first = apply(to_holder, executor.push.waypoints[0])
     assert not box.contains(first)[0]
-    backed = first - inside
-    assert np.linalg.norm(np.cross(backed, local)) < 1e-9 and float(backed @ local) < 0    # back up the line
+    backed = first - apply(to_holder, corner)
+    assert np.linalg.norm(np.cross(backed, down)) < 1e-9 and float(backed @ down) < 0    # back up the line
     home = executor._home_in(observation.holder)
     assert np.linalg.norm(executor.push.waypoints[-1] - apply(observation.holder, box.nearest_outside(home))) < 1e-9
+
+
+def test_a_holder_turn_the_pusher_has_no_route_out_of_the_way_of_is_forgone_not_the_run(bracket_run):
+    """The pusher deep in the bracket's corner off any push line (no way out): a turn of gripper 1 not yet
+    begun is given up with a note and not tried again, the run goes on (before: LIMIT_VIOLATION); a turn
+    back - the object turned away - cannot be given up: that ends the run LIMIT_VIOLATION, saying why."""
+    from dmg_executor.controller import Outcome
+
+    executor, observation, _ = _pusher_in_the_bracket_corner(bracket_run)
+    executor.push = None
+    executor._start_holder_turn(observation, back=False)
+    assert not executor.done and executor.holder_turn is None and not executor.may_turn
+    assert any("did not turn the object: no route" in note for note in executor.notes), executor.notes
+    executor._start_holder_turn(observation, back=True)
+    assert executor.done and executor.result.outcome == Outcome.LIMIT_VIOLATION
+    assert "before the holding gripper turns it back" in executor.result.message
 
 
 def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_run):
