@@ -83,6 +83,8 @@ TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, th
 # from it). A tip grazing a face along the push line there (sim, plug: 7 N on a prong's side as the grip loosened
 # for a level press) shoves the object before the push and may leave the face out of the push's reach.
 TIP_CLEARANCE = 0.002
+_AROUND = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
+SHELL_DIRECTIONS = _AROUND / np.linalg.norm(_AROUND, axis=1, keepdims=True)   # 26 ways out of a fingertip's centre
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 # After the plan, a grasp outside the goal's angle tolerance with its axis tilted more than `level_tilt` off the
 # goal's is pressed back about an axis across it (the object rolling on gripper 1's fingertips, the grip held),
@@ -339,7 +341,7 @@ def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, ori
     other tip started 3 mm inside it, pressed 21 N into it against the closed grip, and the box
     jumped 2.3 mm / 2.1 deg the wrong way when the grip loosened)."""
     met = point + tip_radius * normal - _tip_ahead(-normal, orientation, tip_radius)   # that tip touching `point`
-    tips = met + tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
+    tips = met + _tip_centres(orientation, tip_radius)
     # How far each tip travels along `direction` before it touches the face's plane.
     slant = max(-float(direction @ normal), np.cos(np.deg2rad(SLANT_LIMIT_DEG)))
     travel = ((tips - point) @ normal - tip_radius) / slant
@@ -356,17 +358,20 @@ def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius:
     tilt, turn = np.meshgrid(TIP_RIMS, TIP_RIM_TURNS)
     facing = (np.cos(tilt).reshape(-1, 1) * direction
               + np.sin(tilt).reshape(-1, 1) * (np.cos(turn).reshape(-1, 1) * side + np.sin(turn).reshape(-1, 1) * other))
-    centres = tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
-    return (centres[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
+    return (_tip_centres(orientation, tip_radius)[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
 
 
 def fingertip_shells(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
     """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) TIP_CLEARANCE out from both
     fingertips' spheres, all round them: where a push starts, none may be inside the object."""
-    grid = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
-    out = (tip_radius + TIP_CLEARANCE) * grid / np.linalg.norm(grid, axis=1, keepdims=True)
-    centres = tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
-    return (centres[:, None, :] + out[None]).reshape(-1, 3)
+    out = (tip_radius + TIP_CLEARANCE) * SHELL_DIRECTIONS
+    return (_tip_centres(orientation, tip_radius)[:, None, :] + out[None]).reshape(-1, 3)
+
+
+def _tip_centres(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+    """The closed pusher's two fingertip centres (2, 3; from its grasp frame turned `orientation`): side by
+    side along its x, touching."""
+    return tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
 
 
 def meeting_start(start: np.ndarray, orientation: np.ndarray, direction: np.ndarray, object_pose: np.ndarray,
