@@ -78,16 +78,28 @@ def load_object(name: str) -> ObjectModel:
     )
 
 
+COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
+
+
+def _merged(values: np.ndarray) -> np.ndarray:
+    """The sorted distinct values, those within COORDINATE_TOLERANCE of the one before dropped."""
+    values = np.sort(values)
+    return values[np.r_[True, np.diff(values) > COORDINATE_TOLERANCE]]
+
+
 def box_union_mesh(parts: list[Box]) -> tuple[np.ndarray, np.ndarray]:
     """Watertight triangle mesh of a union of axis-aligned boxes.
 
     The boxes are cut along every box face coordinate into a grid of cells; the surface is
     every cell face between a solid and an empty cell. All faces share the grid's vertices,
-    so the mesh has no T-junctions. Returns (vertices, triangles) wound outward.
+    so the mesh has no T-junctions. Face coordinates closer than COORDINATE_TOLERANCE are one:
+    parts meant to abut often miss each other by a rounding error (0.025 - 0.01 is not 0.015),
+    and a cell that thin between them would leave a pair of faces inside the solid.
+    Returns (vertices, triangles) wound outward.
     """
     lows = np.array([p.center - p.size / 2 for p in parts])
     highs = np.array([p.center + p.size / 2 for p in parts])
-    coords = [np.unique(np.concatenate([lows[:, k], highs[:, k]])) for k in range(3)]
+    coords = [_merged(np.concatenate([lows[:, k], highs[:, k]])) for k in range(3)]
     mids = [(c[:-1] + c[1:]) / 2 for c in coords]
     grid = np.stack(np.meshgrid(*mids, indexing="ij"), axis=-1)
     solid = np.zeros(grid.shape[:3], bool)

@@ -24,6 +24,28 @@ def box_mesh(scale=1.0):
     return vertices * scale, triangles
 
 
+def test_parts_that_abut_up_to_rounding_make_one_closed_solid():
+    """0.025 - 0.01 != 0.015 in floating point: the step's bottom and the base's top must still be one
+    plane, not a thin empty slab with two faces inside the solid."""
+    base = Box(np.zeros(3), np.array([0.09, 0.05, 0.03]))
+    step = Box(np.array([0.025, 0.0, 0.025]), np.array([0.04, 0.05, 0.02]))
+    assert (step.center - step.size / 2)[2] != (base.center + base.size / 2)[2]   # the rounding this is about
+    vertices, triangles = box_union_mesh([base, step])
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(triangles))
+    assert mesh.is_watertight()
+    assert mesh.get_volume() == pytest.approx(0.09 * 0.05 * 0.03 + 0.04 * 0.05 * 0.02, rel=1e-9)
+    corners = vertices[triangles]
+    inward = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    inward /= -np.linalg.norm(inward, axis=1, keepdims=True)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    # Just behind every face is solid (a face between two solid cells would have empty space behind it
+    # on one side), and the point where the two parts meet is inside.
+    behind = (corners.mean(axis=1) + 1e-4 * inward).astype(np.float32)
+    assert scene.compute_occupancy(o3d.core.Tensor(behind)).numpy().all()
+    assert scene.compute_occupancy(o3d.core.Tensor(np.array([[0.025, 0.0, 0.015]], np.float32))).numpy()[0] == 1
+
+
 def test_missing_unsupported_and_empty_files(tmp_path):
     with pytest.raises(ShapeError, match="no such file"):
         load_shape(tmp_path / "nothing.stl")
