@@ -251,7 +251,7 @@ def run_eval(args: argparse.Namespace) -> int:
     from dmg_perception.estimator import ObjectPoseEstimator
     from dmg_planner.library import ObjectLibrary, options_from_parameters
     from dmg_planner.manipulability import manipulability_matrix
-    from dmg_planner.objects import load_object
+    from dmg_planner.objects import ObjectError, load_object
     from dmg_planner.transforms import invert
     from dmg_sim_bridge.cell import Cell
 
@@ -270,7 +270,11 @@ def run_eval(args: argparse.Namespace) -> int:
     planner = parameter_defaults("planner")
     library = ObjectLibrary(*options_from_parameters(planner),
                             Path(planner["cache_dir"]).expanduser() if planner["cache_dir"] else None)
-    models = [load_object(name) for name in settings.objects]
+    try:
+        models = [load_object(name) for name in settings.objects]
+    except ObjectError as error:
+        print(f"dmg eval: error: {error}", file=sys.stderr)
+        return 2
     cell = Cell()
     loop = ClosedLoop(cell, ObjectPoseEstimator(models))
     runs: list[RunOutcome] = []

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dmg_planner.graph_parameters import GraphParameters
-from dmg_planner.objects import load_object, object_names
+from dmg_planner.objects import ObjectError, load_object, object_names
 
 if TYPE_CHECKING:  # the core needs open3d; it is imported when a verb runs, keeping `dmg` quick to start
     from dmg_planner.graph import DexterousManipulationGraph
@@ -53,7 +53,10 @@ def load_source(args: argparse.Namespace) -> DexterousManipulationGraph:
         except (GraphFileError, FileNotFoundError) as error:
             raise UsageError(str(error)) from error
     if source in object_names():
-        model = load_object(source)
+        try:
+            model = load_object(source)
+        except ObjectError as error:
+            raise UsageError(str(error)) from error
         path, units, seed = model.mesh_path, model.units, model.seed_resolution
     else:
         if not Path(source).exists():

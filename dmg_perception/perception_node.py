@@ -34,7 +34,7 @@ from dmg_interfaces.msg import PerceptionStatus, TagDetection, TagDetections
 from dmg_perception.estimator import EstimationError, ObjectPoseEstimator
 from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState
-from dmg_planner.objects import load_object, object_names
+from dmg_planner.objects import ObjectError, load_object, object_names
 
 INPUT_WAIT = 0.1   # s (wall) an image waits for the camera and gripper poses of its time stamp (and camera_info)
 
@@ -48,11 +48,17 @@ class PerceptionNode(Node):
     def __init__(self) -> None:
         super().__init__("perception")
         values = self.values = declare_from_config(self, "perception")
-        names = object_names() if list(values["objects"]) == ["*"] else list(values["objects"])
-        if values["object"] and values["object"] not in names:
-            names.append(values["object"])
-        estimator = ObjectPoseEstimator([load_object(name) for name in names], values["inlier_threshold"],
-                                        values["pixel_noise"])
+        every = list(values["objects"]) == ["*"]
+        named = ([] if every else list(values["objects"])) + ([values["object"]] if values["object"] else [])
+        models = []
+        for name in dict.fromkeys((object_names() if every else []) + named):
+            try:
+                models.append(load_object(name))
+            except ObjectError as error:
+                if name in named:     # asked for by name: the node cannot do its job without it
+                    raise
+                self.get_logger().error(f"{error}; perception goes on without it")
+        estimator = ObjectPoseEstimator(models, values["inlier_threshold"], values["pixel_noise"])
         self.tracker = Tracker(estimator, values["lost_timeout"], values["pose_tolerance"], values["object"])
         self.lock = threading.Lock()            # guards the tracker's buffers and the pending image
         self.pending: Image | None = None
@@ -78,7 +84,7 @@ class PerceptionNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         self.worker = threading.Thread(target=self.work, name="perception", daemon=True)
         self.worker.start()
-        self.get_logger().info(f"perception up: tag layouts of {', '.join(names)}; tracking "
+        self.get_logger().info(f"perception up: tag layouts of {', '.join(model.name for model in models)}; tracking "
                                f"{values['object'] or 'whichever object is in view'} on {values['image_topic']}")
 
     # --- callbacks: store, never process ------------------------------------------------

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
+TAG_IDS = 587                 # the 36h11 family: ids 0 .. 586
 
 def config_dir() -> Path:
     """config/ of this checkout, or DMG_CONFIG_DIR (kept ROS-free on purpose)."""
@@ -63,22 +65,97 @@ def object_names() -> list[str]:
     return sorted(p.parent.name for p in root.glob("*/object.yaml"))
 
 
+class ObjectError(KeyError):
+    """An object that cannot be used: unknown, or its object.yaml is broken (the message says where).
+    A KeyError, as an unknown name always was, so every caller that refuses an unknown object
+    refuses a broken one the same way."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 def load_object(name: str) -> ObjectModel:
     path = config_dir() / "objects" / name / "object.yaml"
     if not path.is_file():
-        raise KeyError(f"unknown object {name!r}: known objects are {', '.join(object_names())}")
-    doc = yaml.safe_load(path.read_text())
-    return ObjectModel(
-        name=name, directory=path.parent, mesh_file=doc["mesh"], units=doc.get("units", "m"),
-        mass=float(doc["mass"]), seed_resolution=float(doc["seed_resolution"]),
-        description=doc.get("description", ""),
-        parts=[Box(np.asarray(p["center"], float), np.asarray(p["size"], float)) for p in doc["parts"]],
-        apriltags=[AprilTag(int(t["id"]), float(t["size"]), np.asarray(t["position"], float),
-                            np.asarray(t["rpy_deg"], float)) for t in doc.get("apriltags", [])],
-    )
+        raise ObjectError(f"unknown object {name!r}: known objects are {', '.join(object_names())}")
+    try:
+        doc = yaml.safe_load(path.read_text())
+        if not isinstance(doc, dict):
+            raise ValueError("the file is not a mapping of fields")
+        units = doc.get("units", "m")
+        if units not in ("m", "mm"):
+            raise ValueError(f"units {units!r}: use m or mm")
+        model = ObjectModel(
+            name=name, directory=path.parent, mesh_file=str(_field(doc, "mesh")), units=units,
+            mass=_positive(_field(doc, "mass"), "mass"),
+            seed_resolution=_positive(_field(doc, "seed_resolution"), "seed_resolution"),
+            description=str(doc.get("description", "")),
+            parts=[Box(_vector(_field(p, "center"), f"parts[{i}].center"),
+                       _vector(_field(p, "size"), f"parts[{i}].size", positive=True))
+                   for i, p in enumerate(_list(doc, "parts"))],
+            apriltags=[AprilTag(_tag_id(_field(t, "id"), i), _positive(_field(t, "size"), f"apriltags[{i}].size"),
+                                _vector(_field(t, "position"), f"apriltags[{i}].position"),
+                                _vector(_field(t, "rpy_deg"), f"apriltags[{i}].rpy_deg"))
+                       for i, t in enumerate(_list(doc, "apriltags", required=False))],
+        )
+        if not model.parts:
+            raise ValueError("parts is empty: an object is at least one box")
+        ids = [tag.id for tag in model.apriltags]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"apriltags: an id is used twice ({sorted(ids)})")
+        _check_connected(model.parts)
+    except (yaml.YAMLError, ValueError, TypeError) as error:
+        raise ObjectError(f"object {name!r} ({path}): {error}") from None
+    return model
 
 
-COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
+def _field(doc, key: str):
+    if not isinstance(doc, dict) or key not in doc:
+        raise ValueError(f"missing field {key!r}")
+    return doc[key]
+
+
+def _list(doc: dict, key: str, required: bool = True) -> list:
+    value = _field(doc, key) if required else doc.get(key) or []
+    if not isinstance(value, list):
+        raise ValueError(f"{key} must be a list")
+    return value
+
+
+def _positive(value, what: str) -> float:
+    number = float(value)
+    if not np.isfinite(number) or number <= 0:
+        raise ValueError(f"{what} = {value}: must be a finite number > 0")
+    return number
+
+
+def _vector(value, what: str, positive: bool = False) -> np.ndarray:
+    vector = np.asarray(value, float)
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)) or (positive and np.any(vector <= 0)):
+        raise ValueError(f"{what} = {value}: must be three finite numbers{' > 0' if positive else ''}")
+    return vector
+
+
+def _tag_id(value, index: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < TAG_IDS:
+        raise ValueError(f"apriltags[{index}].id = {value!r}: must be a 36h11 id, an integer 0 .. {TAG_IDS - 1}")
+    return value
+
+
+def _check_connected(parts: list[Box]) -> None:
+    """The parts must make one solid: every box touches (or overlaps) another, all joined."""
+    from scipy.sparse.csgraph import connected_components
+
+    lows = np.array([p.center - p.size / 2 for p in parts])
+    highs = np.array([p.center + p.size / 2 for p in parts])
+    touching = np.all((lows[:, None] <= highs[None] + COORDINATE_TOLERANCE)
+                      & (lows[None] <= highs[:, None] + COORDINATE_TOLERANCE), axis=-1)
+    count, labels = connected_components(touching, directed=False)
+    if count > 1:
+        apart = [i for i in range(len(parts)) if labels[i] != labels[0]]
+        raise ValueError(f"parts {apart} do not touch parts[0]: the boxes must make one solid")
+
+
 
 
 def _merged(values: np.ndarray) -> np.ndarray:

@@ -1,13 +1,14 @@
 """perception_node on the simulated cell: both as separate processes over real DDS."""
 from __future__ import annotations
 
+import subprocess
 import time
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes, RosTestNode
+from conftest import DMG, REPO, Processes, RosTestNode
 from dmg_planner.transforms import distance, homogeneous
 
 pytestmark = pytest.mark.ros
@@ -132,3 +133,35 @@ def test_corrupted_or_unsupported_images_are_logged_and_the_node_carries_on(cell
     status = watcher.wait_for(lambda: watcher.latest.get("/bad/perception/status"), what="status of /bad")
     assert status.state == status.NO_CAMERA
     assert processes["bad"].poll() is None and processes["perception"].poll() is None
+
+
+def test_a_broken_object_file_is_left_out_unless_asked_for_by_name(tmp_path, processes):
+    """objects: ['*'] takes every object under config/objects: one with a broken object.yaml is logged
+    and left out, the node runs on; asked for by name, the node cannot start and says why."""
+    import os
+    import shutil
+
+    config = tmp_path / "config"
+    shutil.copytree(REPO / "config", config)
+    (config / "objects" / "zz_broken").mkdir()
+    (config / "objects" / "zz_broken" / "object.yaml").write_text("mesh: mesh.stl\nmass: 0.1\n")
+    environment = {**os.environ, "DMG_CONFIG_DIR": str(config)}
+    log = tmp_path / "perception_all.log"
+    with log.open("w") as sink:
+        node = processes.start([DMG, "run", "dmg_perception", "perception_node"], stdout=sink,
+                               stderr=subprocess.STDOUT, env=environment)
+    watcher = RosTestNode("broken_object_watcher")
+    try:
+        from dmg_interfaces.msg import PerceptionStatus
+
+        statuses = []
+        watcher.node.create_subscription(PerceptionStatus, "/perception/status", statuses.append, 10)
+        watcher.wait_for(lambda: statuses, timeout=30, what="the perception status")
+    finally:
+        watcher.close()
+    assert node.poll() is None
+    assert "object 'zz_broken'" in log.read_text() and "missing field 'seed_resolution'" in log.read_text()
+    result = subprocess.run([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-p", "object:=zz_broken"],
+                            capture_output=True, text=True, timeout=60, env=environment)
+    assert result.returncode == 1
+    assert "cannot start: object 'zz_broken'" in result.stderr and "missing field 'seed_resolution'" in result.stderr

@@ -6,7 +6,7 @@ import open3d as o3d
 import pytest
 
 from dmg_planner.graph import GraphParameters, build_graph
-from dmg_planner.objects import box_union_mesh, load_object, Box
+from dmg_planner.objects import Box, ObjectError, box_union_mesh, load_object
 from dmg_planner.shape import ShapeError, load_shape
 from dmg_planner.storage import GraphCache, cache_key
 
@@ -44,6 +44,48 @@ def test_parts_that_abut_up_to_rounding_make_one_closed_solid():
     behind = (corners.mean(axis=1) + 1e-4 * inward).astype(np.float32)
     assert scene.compute_occupancy(o3d.core.Tensor(behind)).numpy().all()
     assert scene.compute_occupancy(o3d.core.Tensor(np.array([[0.025, 0.0, 0.015]], np.float32))).numpy()[0] == 1
+
+
+GOOD_OBJECT = {"mesh": "mesh.stl", "mass": 0.1, "seed_resolution": 0.013,
+               "parts": [{"center": [0, 0, 0], "size": [0.1, 0.06, 0.04]}],
+               "apriltags": [{"id": 0, "size": 0.024, "position": [0, 0, 0.02], "rpy_deg": [0, 0, 0]}]}
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"mass": None}, "missing field 'mass'"),
+    ({"mass": -0.1}, "mass = -0.1: must be a finite number > 0"),
+    ({"seed_resolution": float("nan")}, "seed_resolution = nan"),
+    ({"units": "inch"}, "units 'inch': use m or mm"),
+    ({"parts": []}, "parts is empty"),
+    ({"parts": [{"center": [0, 0], "size": [0.1, 0.1, 0.1]}]}, "parts[0].center = [0, 0]: must be three finite numbers"),
+    ({"parts": [{"center": [0, 0, 0], "size": [0.1, 0.0, 0.1]}]}, "parts[0].size = [0.1, 0.0, 0.1]: must be three finite numbers > 0"),
+    ({"parts": [{"center": [0, 0, 0], "size": [0.1, 0.1, 0.1]}, {"center": [0.2, 0, 0], "size": [0.1, 0.1, 0.1]}]},
+     "parts [1] do not touch parts[0]"),
+    ({"apriltags": [{"id": 600, "size": 0.02, "position": [0, 0, 0], "rpy_deg": [0, 0, 0]}]}, "apriltags[0].id = 600"),
+    ({"apriltags": [{"id": 1, "size": 0.02, "position": [0, 0, 0], "rpy_deg": [0, 0, 0]}] * 2}, "an id is used twice"),
+    ({"apriltags": [{"id": 1, "size": 0.02, "position": [0, 0, 0]}]}, "missing field 'rpy_deg'"),
+])
+def test_a_broken_object_yaml_is_refused_naming_the_file_and_field(tmp_path, monkeypatch, change, words):
+    import yaml
+
+    monkeypatch.setenv("DMG_CONFIG_DIR", str(tmp_path))
+    doc = {key: value for key, value in {**GOOD_OBJECT, **change}.items() if value is not None}
+    (tmp_path / "objects" / "thing").mkdir(parents=True)
+    (tmp_path / "objects" / "thing" / "object.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(ObjectError) as caught:
+        load_object("thing")
+    assert words in str(caught.value) and "object 'thing'" in str(caught.value)
+    assert isinstance(caught.value, KeyError)   # refused wherever an unknown object is
+
+
+def test_parts_that_touch_along_a_face_make_one_object(tmp_path, monkeypatch):
+    import yaml
+
+    monkeypatch.setenv("DMG_CONFIG_DIR", str(tmp_path))
+    parts = [{"center": [0, 0, 0], "size": [0.1, 0.1, 0.1]}, {"center": [0.1, 0, 0], "size": [0.1, 0.1, 0.1]}]
+    (tmp_path / "objects" / "thing").mkdir(parents=True)
+    (tmp_path / "objects" / "thing" / "object.yaml").write_text(yaml.safe_dump({**GOOD_OBJECT, "parts": parts}))
+    assert len(load_object("thing").parts) == 2
 
 
 def test_missing_unsupported_and_empty_files(tmp_path):
