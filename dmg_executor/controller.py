@@ -66,7 +66,15 @@ SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for
 PARTIAL_MISS_TURN = np.deg2rad(2.0)
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
-MISSED_TURN = np.deg2rad(10.0)   # a rotation's pusher turned this far with the object not turning 1 deg: it missed the face
+# A rotation's pusher turned this far, beyond the sweep that brings its tips onto the face, with the object not
+# turning 1 deg: it missed the face.
+MISSED_TURN = np.deg2rad(10.0)
+# A rotation's pusher sweeps round the grasp axis, its tips not along the push line: from touching the face's
+# push point, they must meet it again within this turn (more: the sweep runs along the face or past its edge).
+SWEEP_LIMIT = np.deg2rad(5.0)
+SWEEP_STEP = np.deg2rad(0.5)
+SWEEP_REACH = 0.0005    # m: a tip this near the face meets it (the sweep is judged from SWEEP_BACK short of touching)
+SWEEP_BACK = 0.001
 MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
 TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
 HOLDER_MOVED = (0.01, np.deg2rad(10.0))   # m, rad: gripper 1 this far from where it started (pushes at alpha < 1) may go back
@@ -368,6 +376,24 @@ def fingertip_shells(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
     return (_tip_centres(orientation, tip_radius)[:, None, :] + out[None]).reshape(-1, 3)
 
 
+def sweep_to_touch(surface: ObjectSurface, object_pose: np.ndarray, pusher: np.ndarray, holder: np.ndarray,
+                   direction: np.ndarray, tip_radius: float, limit: float) -> float:
+    """How far [rad] the closed pusher (pose `pusher`, base frame) turns about the grasp axis (x of `holder`)
+    the way that moves it along the push `direction` before a fingertip comes within SWEEP_REACH of the
+    object at `object_pose`; inf if not within `limit`. A rotation's pusher sweeps: where its tips lie
+    beside the grasp axis rather than across the push line from it, the sweep runs along the face more
+    than into it."""
+    axis, origin = holder[:3, 0], holder[:3, 3]
+    tips = pusher[:3, 3] + _tip_centres(pusher[:3, :3], tip_radius)
+    sense = 1.0 if float(np.cross(axis, tips.mean(axis=0) - origin) @ direction) >= 0.0 else -1.0
+    angles = np.arange(0.0, limit + SWEEP_STEP / 2, SWEEP_STEP)
+    turns = Rotation.from_rotvec(sense * angles[:, None] * axis).as_matrix()          # (k, 3, 3)
+    swept = np.einsum("kij,nj->kni", turns, tips - origin) + origin                    # (k, 2, 3)
+    near = surface.distance(apply(invert(object_pose), swept.reshape(-1, 3))).reshape(len(angles), -1).min(axis=1)
+    touching = np.flatnonzero(near <= tip_radius + SWEEP_REACH)
+    return float(angles[touching[0]]) if len(touching) else float("inf")
+
+
 def _tip_centres(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
     """The closed pusher's two fingertip centres (2, 3; from its grasp frame turned `orientation`): side by
     side along its x, touching."""
@@ -468,6 +494,7 @@ class PlanExecutor:
         self.level_began = 0.0                # rad: the tilt off the goal's grasp axis when leveling began
         self.fruitless: list[np.ndarray] = []   # places (holder frame) a look saw the object from none of the views at
         self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
+        self.sweep_to_face = 0.0   # rad a rotation's pusher turns before its tips meet the face (as seen when it began)
         self.reckoning: Reckoning | None = None   # the current push's last known object pose
         self.reckoned: np.ndarray | None = None    # object pose believed while unseen since a push moved it (or the holder turned it)
         self.reckoned_time = -math.inf
@@ -1172,18 +1199,32 @@ class PlanExecutor:
         # line started, met 13 mm before the start at 23 N on the way in, SLIP; the plug: a level press's
         # approach met a prong 7 mm early), and its way in goes through that part.
         normal, to_object = object_pose[:3, :3] @ push.normal, invert(object_pose)
-        clashes = 0
+        # A rotation's pusher, touching the push point, turns about the grasp axis: its tips must sweep into the
+        # face there, not along it (sim, stepped block: tips beside the axis slid up the face past its edge,
+        # eight pushes taken to have missed).
+        sweeping = self._primitive.kind == PrimitiveKind.ROTATION and not self._leveling
+        clashes = sweeps = 0
         for first, view in enumerate(views):
             start = push_start(point, normal, direction, view, s.tip_radius, s.gap)
             clash = self._hands_clash(start, view, occluders)
             clashes += clash
-            if not clash and not self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius))).any():
-                break
+            if clash or self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius))).any():
+                continue
+            near = from_rotation(view, start + (s.gap - SWEEP_BACK) * direction)
+            if sweeping and not np.isfinite(sweep_to_touch(self.surface, object_pose, near, holder, direction,
+                                                           s.tip_radius, SWEEP_LIMIT)):
+                sweeps += 1
+                continue
+            break
         else:
-            what = ("the pusher's hand into the holding gripper" if clashes == len(views) else
+            others = len(views) - sweeps
+            what = ("the pusher's hand into the holding gripper" if clashes == others else
                     "a fingertip into the object" if clashes == 0 else
                     "the pusher's hand into the holding gripper or a fingertip into the object")
-            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would put {what} "
+            sweep = ("sweep its tips along the face rather than into it as it turns about the grasp axis"
+                     if sweeps else "")
+            what = f"put {what}" + (f" or {sweep}" if sweep else "") if others else sweep
+            raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would {what} "
                              "however it is turned")
         views, seen = views[first:], seen[first:]
         start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap)
@@ -1490,6 +1531,10 @@ class PlanExecutor:
                 command.holder_grip = self._held() if self._leveling else self._loosened(obs)
                 return command
             self.phase = "push"
+            if primitive.kind == PrimitiveKind.ROTATION and not self._leveling:
+                sweep = sweep_to_touch(self.surface, obs.holder @ seen, obs.pusher, obs.holder,
+                                       obs.holder[:3, :3] @ self.push.local_direction, s.tip_radius, 2 * MISSED_TURN)
+                self.sweep_to_face = sweep if np.isfinite(sweep) else 0.0
         if self.phase == "tighten":
             if obs.time < self.grip_until:
                 return Command()
@@ -1519,7 +1564,7 @@ class PlanExecutor:
                 return self._tighten(obs)
             pusher_turned = abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher))
             stalled = self._turn_stalled(pusher_turned, turned)
-            if (stalled and abs(turned) < TURN_GAIN) or (self.turn_mark is None and pusher_turned > MISSED_TURN):
+            if (stalled and abs(turned) < TURN_GAIN) or (self.turn_mark is None and pusher_turned > self.sweep_to_face + MISSED_TURN):
                 # No turn to show for it (a stall after a noise 'gain', or none at all): turning in the air.
                 self._mark_missed(f"a rotation push of primitive {self.index} missed the object (it turned "
                                   f"{np.rad2deg(turned):.1f} deg): not tried there again")

@@ -72,6 +72,10 @@ class ObjectSurface:
         """Which of `points` (n, 3; object frame) are inside the object."""
         return self.scene.compute_occupancy(o3d.core.Tensor(np.asarray(points, np.float32))).numpy() > 0.5
 
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """How far [m] each of `points` (n, 3; object frame) is from the object's surface."""
+        return self.scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy().astype(float)
+
     def travel(self, points: np.ndarray, direction: np.ndarray) -> float:
         """How far [m] `points` (n, 3; object frame, outside the object) move along `direction`
         before the first of them meets the object; inf if none does."""

@@ -1710,11 +1710,29 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
     assert executor.settings.rotation_slide < slid < executor.settings.rotation_slide + 0.001, slid
 
 
+def test_a_rotation_pushers_sweep_meets_a_face_across_it_not_one_it_runs_along(box_surface):
+    """A rotation's pusher turns about the grasp axis: its tips sweep round it. Beside the box's side
+    face, 18 mm off the axis along it, the sweep runs into the face within a few degrees; over the top
+    face, straight above the axis, it runs along the face and comes no nearer within SWEEP_LIMIT (such
+    a push is not planned; sim: eight pushes taken to have missed the stepped block)."""
+    from dmg_executor.controller import SWEEP_LIMIT, sweep_to_touch
+    from dmg_planner.transforms import from_rotation
+
+    radius, holder, box_pose = 0.008, np.eye(4), np.eye(4)        # the grasp axis along x through the box's centre
+    beside = from_rotation(np.eye(3), [0.0, 0.03 + radius + 0.001, 0.018])   # tips side by side along x, 1 mm off
+    turn = sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, -1.0, 0.0]), radius, SWEEP_LIMIT)
+    assert np.deg2rad(0.5) <= turn <= np.deg2rad(3.0), np.rad2deg(turn)
+    over = from_rotation(np.eye(3), [0.0, 0.0, 0.02 + radius + 0.001])
+    assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, SWEEP_LIMIT) == np.inf
+    # Turned the other way the pusher sweeps away from the side face: the sense follows the push's direction.
+    assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, SWEEP_LIMIT) == np.inf
+
+
 def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned_again(loop_parts, box_surface):
     """A pusher turning in the air (the face not where the push was planned) would turn on until the
     step's time limit, and the same push be planned again (sim: the plug's far side, five times).
     Here the camera shows the object not turning at all: the push stops once the pusher has turned
-    MISSED_TURN, and the next push is planned elsewhere."""
+    MISSED_TURN beyond the sweep that brings its tips onto the face, and the next push is planned elsewhere."""
     from dataclasses import replace
 
     from dmg_executor.controller import MISSED_NEAR, MISSED_TURN, _turned_since
@@ -1733,7 +1751,9 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
         cell.run(loop.control_period)
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("missed the object" in note for note in executor.notes), executor.notes
-    assert MISSED_TURN < pusher_turned < MISSED_TURN + np.deg2rad(1.0), np.rad2deg(pusher_turned)
+    limit = MISSED_TURN + executor.sweep_to_face
+    assert executor.sweep_to_face < np.deg2rad(5.0)
+    assert limit < pusher_turned < limit + np.deg2rad(1.0), np.rad2deg([pusher_turned, executor.sweep_to_face])
     missed = executor.missed[0]
     while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
         _tick(loop, executor)
