@@ -18,6 +18,7 @@ import yaml
 COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
 TAG_IDS = 587                 # the 36h11 family: ids 0 .. 586
 
+
 def config_dir() -> Path:
     """config/ of this checkout, or DMG_CONFIG_DIR (kept ROS-free on purpose)."""
     return Path(os.environ.get("DMG_CONFIG_DIR", Path(__file__).resolve().parent.parent / "config"))
@@ -123,14 +124,20 @@ def _list(doc: dict, key: str, required: bool = True) -> list:
 
 
 def _positive(value, what: str) -> float:
-    number = float(value)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} = {value!r}: must be a number") from None
     if not np.isfinite(number) or number <= 0:
         raise ValueError(f"{what} = {value}: must be a finite number > 0")
     return number
 
 
 def _vector(value, what: str, positive: bool = False) -> np.ndarray:
-    vector = np.asarray(value, float)
+    try:
+        vector = np.asarray(value, float)
+    except (TypeError, ValueError):
+        vector = np.zeros(0)
     if vector.shape != (3,) or not np.all(np.isfinite(vector)) or (positive and np.any(vector <= 0)):
         raise ValueError(f"{what} = {value}: must be three finite numbers{' > 0' if positive else ''}")
     return vector
@@ -154,8 +161,6 @@ def _check_connected(parts: list[Box]) -> None:
     if count > 1:
         apart = [i for i in range(len(parts)) if labels[i] != labels[0]]
         raise ValueError(f"parts {apart} do not touch parts[0]: the boxes must make one solid")
-
-
 
 
 def _merged(values: np.ndarray) -> np.ndarray:

@@ -145,23 +145,27 @@ def test_a_broken_object_file_is_left_out_unless_asked_for_by_name(tmp_path, pro
     shutil.copytree(REPO / "config", config)
     (config / "objects" / "zz_broken").mkdir()
     (config / "objects" / "zz_broken" / "object.yaml").write_text("mesh: mesh.stl\nmass: 0.1\n")
-    environment = {**os.environ, "DMG_CONFIG_DIR": str(config)}
+    environment = {**os.environ, "DMG_CONFIG_DIR": str(config), "RCUTILS_LOGGING_BUFFERED_STREAM": "0"}
     log = tmp_path / "perception_all.log"
     with log.open("w") as sink:
-        node = processes.start([DMG, "run", "dmg_perception", "perception_node"], stdout=sink,
-                               stderr=subprocess.STDOUT, env=environment)
+        node = processes.start([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-r", "__ns:=/all"],
+                               stdout=sink, stderr=subprocess.STDOUT, env=environment)
     watcher = RosTestNode("broken_object_watcher")
     try:
         from dmg_interfaces.msg import PerceptionStatus
 
         statuses = []
-        watcher.node.create_subscription(PerceptionStatus, "/perception/status", statuses.append, 10)
+        watcher.node.create_subscription(PerceptionStatus, "/all/perception/status", statuses.append, 10)
         watcher.wait_for(lambda: statuses, timeout=30, what="the perception status")
     finally:
         watcher.close()
     assert node.poll() is None
+    deadline = time.monotonic() + 15.0          # the node's log reaches the file when its stream flushes
+    while "missing field 'seed_resolution'" not in log.read_text() and time.monotonic() < deadline:
+        time.sleep(0.2)
     assert "object 'zz_broken'" in log.read_text() and "missing field 'seed_resolution'" in log.read_text()
-    result = subprocess.run([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-p", "object:=zz_broken"],
+    result = subprocess.run([DMG, "run", "dmg_perception", "perception_node", "--ros-args", "-r", "__ns:=/named", "-p",
+                             "object:=zz_broken"],
                             capture_output=True, text=True, timeout=60, env=environment)
     assert result.returncode == 1
     assert "cannot start: object 'zz_broken'" in result.stderr and "missing field 'seed_resolution'" in result.stderr

@@ -54,6 +54,8 @@ GOOD_OBJECT = {"mesh": "mesh.stl", "mass": 0.1, "seed_resolution": 0.013,
 @pytest.mark.parametrize("change, words", [
     ({"mass": None}, "missing field 'mass'"),
     ({"mass": -0.1}, "mass = -0.1: must be a finite number > 0"),
+    ({"mass": "heavy"}, "mass = 'heavy': must be a number"),
+    ({"parts": [{"center": ["a", 0, 0], "size": [0.1, 0.1, 0.1]}]}, "parts[0].center = ['a', 0, 0]: must be three"),
     ({"seed_resolution": float("nan")}, "seed_resolution = nan"),
     ({"units": "inch"}, "units 'inch': use m or mm"),
     ({"parts": []}, "parts is empty"),
