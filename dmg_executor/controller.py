@@ -51,10 +51,18 @@ SETTLED_SHARE = 0.8   # ... and with the grasp within this share of the goal's t
 WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
 EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
 LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
+# Where no rotation push through the grasp's middle can be given, push lines this share of the way from the
+# middle to either fingertip (object narrow at the middle, wide near a finger: a T held across its stem's
+# foot and its bar's top - sim probe: the stem's levers all failed, the rotation left 8 deg off).
+OFF_MIDDLE_SHARES = np.array([0.5, -0.5, 0.75, -0.75])
 LEADING_TIP = 0.5      # tips one behind the other: the one ahead along the push by at least this share of their spacing
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
 TURN_GAIN = np.deg2rad(1.0)   # the object turning this much with the pusher is progress (pose noise: up to 0.5 deg)
+# Tilt steering that has slid the pusher this far along the grasp axis while the tilt it steers grew this much
+# beyond the least seen meanwhile turns it the wrong way: it steers the other way from there.
+STEER_TRIAL = 0.003   # m
+STEER_WORSE = np.deg2rad(1.5)
 HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to where the pusher goes is headway
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
@@ -309,6 +317,28 @@ def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
 
 
+@dataclass
+class SteeringCheck:
+    """Whether tilt steering's way (`tilt_steering`, a model of the frictions) turns the tilt back: where
+    the lever and the grip's reach are close, or the object's weight drags on the pusher, it can turn it
+    further (sim, a T pushed across its 60 mm grasp on its 20 mm-lever stem: 0 -> 5.9 deg as the
+    pusher slid 14 mm along the grasp axis, run lost). One per push."""
+
+    sense: float = 1.0                 # +1: as the model says; -1: the other way
+    since: float | None = None         # where the pusher was along the grasp axis when this sense began [m]
+    least: float = math.inf            # the least tilt [rad] seen since
+    flips: int = 0
+
+    def update(self, tilt: float, place: float) -> float:
+        """The sense to steer with, given the steered tilt's size now and the pusher's place along the axis."""
+        if self.since is None:
+            self.since = place
+        self.least = min(self.least, tilt)
+        if abs(place - self.since) >= STEER_TRIAL and tilt > self.least + STEER_WORSE:
+            self.sense, self.since, self.least, self.flips = -self.sense, place, tilt, self.flips + 1
+        return self.sense
+
+
 def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_reach: float) -> float:
     """Which way [rad, signed] the pusher should slide along the grasp axis x (holder frame) to turn a
     pushed object's tilt `tilt` (rotation vector) back. Sliding drags the face along x by friction
@@ -488,6 +518,7 @@ class PlanExecutor:
         self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.pushed_point: PushPoint | None = None   # ... and where on the object
+        self.steering = SteeringCheck()      # ... and whether its tilt steering turns the tilt back
         self.missed: list[PushPoint] = []    # rotation pushes whose pusher turned without turning the object
         self.level_index: int | None = None   # the correction that presses the object level (see level_tilt)
         self.level_axis = np.zeros(3)         # holder frame: the axis the current level push turns the object about
@@ -1034,18 +1065,21 @@ class PlanExecutor:
         # instead, the plug's set did worse: a translation first slid it where the rotation then pushed
         # it back towards the palm.)
         paper = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
-        faces = self._face_pushes(obs, holder_in_object)
-        faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(SAME_PUSH)]
         problems = []
-        for directions in (paper, faces):
-            pushes = self._rotation_pushes(obs, directions, limited, problems)
-            try:
-                candidates = self._watched(obs, pushes, occluders) if pushes else []
-            except (PushError, RouteError) as error:
-                problems.append(str(error))
-                continue
-            if candidates:   # first of the best seen: the longest lever beyond the tips
-                return max(candidates, key=lambda candidate: candidate[1])[0]
+        for height in (0.0, *OFF_MIDDLE_SHARES * obs.opening / 2):
+            if height and not self.surface.inside((holder_in_object[:3, 3] + height * holder_in_object[:3, 0])[None])[0]:
+                continue     # (the axis crosses a hollow there)
+            faces = self._face_pushes(obs, holder_in_object, height)
+            faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(SAME_PUSH)]
+            for directions in (paper, faces):
+                pushes = self._rotation_pushes(obs, directions, limited, problems, height)
+                try:
+                    candidates = self._watched(obs, pushes, occluders) if pushes else []
+                except (PushError, RouteError) as error:
+                    problems.append(str(error))
+                    continue
+                if candidates:   # first of the best seen: the longest lever beyond the tips
+                    return max(candidates, key=lambda candidate: candidate[1])[0]
         raise PushError("; ".join(problems))
 
     def _plan_level_push(self, obs: Observation, occluders: Occluders) -> _Push:
@@ -1087,13 +1121,16 @@ class PlanExecutor:
             raise PushError("no level push runs the way the pusher's fingers point where it started")
         return _best_level_press(candidates, middle, rotation @ self.level_axis, reach)
 
-    def _rotation_pushes(self, obs: Observation, directions: np.ndarray, angle: float, problems: list[str]) -> list[PushPoint]:
-        """Push points turning the object by `angle` about x, pushed along `directions` (holder frame),
-        each at the full lever or shorter ones where the object is small, in order of preference;
-        why others were not taken goes to `problems`."""
+    def _rotation_pushes(self, obs: Observation, directions: np.ndarray, angle: float, problems: list[str],
+                         height: float = 0.0) -> list[PushPoint]:
+        """Push points turning the object by `angle` about x, pushed along `directions` (holder frame)
+        on lines `height` [m] along the grasp axis from the grasp's middle, each at the full lever or
+        shorter ones where the object is small, in order of preference; why others were not taken
+        goes to `problems`."""
         s = self.settings
         holder_in_object = invert(obs.object_in_holder)
-        middle = holder_in_object[:3, 3]                 # the grasp's middle on the object (object frame)
+        # On the grasp axis (object frame): the torque about the axis is the same at any height.
+        middle = holder_in_object[:3, 3] + height * holder_in_object[:3, 0]
         palm = -holder_in_object[:3, 2]
         palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
         ranked = []
@@ -1128,12 +1165,13 @@ class PlanExecutor:
         wanted = (share >= np.cos(DETOUR_LIMIT) * float(np.linalg.norm(motion))) & (share > self.settings.position_tolerance)
         return list(pushes[wanted])
 
-    def _face_pushes(self, obs: Observation, holder_in_object: np.ndarray) -> np.ndarray:
+    def _face_pushes(self, obs: Observation, holder_in_object: np.ndarray, height: float = 0.0) -> np.ndarray:
         """(k, 3) unit directions (holder frame, across the grasp axis) square onto the object's faces
-        round the grasp, one per face."""
+        round the grasp axis `height` [m] along it from the grasp's middle, one per face."""
         angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
         rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
-        normals = exit_normals(self.surface, holder_in_object[:3, 3], rays @ holder_in_object[:3, :3].T)
+        centre = holder_in_object[:3, 3] + height * holder_in_object[:3, 0]
+        normals = exit_normals(self.surface, centre, rays @ holder_in_object[:3, :3].T)
         pushes = -(normals[np.isfinite(normals).all(axis=1)] @ obs.object_in_holder[:3, :3].T)
         pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
         lengths = np.linalg.norm(pushes, axis=1)
@@ -1496,7 +1534,7 @@ class PlanExecutor:
             # A level press the camera sees needs no turn back to be judged: the next is planned as the holder stands.
             self.pressed_turned = self.far_side and self._leveling and not self.push.blind
             self.far_side_pushed = self.far_side and not self.pressed_turned
-            self.pushed_reference = self._push_reference(obs)
+            self.pushed_reference, self.steering = self._push_reference(obs), SteeringCheck()
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
             self.pushed_point = self.push.contact
@@ -1656,6 +1694,11 @@ class PlanExecutor:
         local = self.push.local_direction
         lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
         steer = tilt_steering(tilt, local, lever, s.grip_friction * obs.opening / 2)
+        flips = self.steering.flips
+        steer *= self.steering.update(abs(float(tilt @ np.cross(local, [1.0, 0.0, 0.0]))), float(pusher[0, 3]))
+        if self.steering.flips > flips:
+            self.notes.append(f"tilt steering of primitive {self.index} turned the object further off the grasp axis "
+                              f"({np.rad2deg(self.steering.least):.1f} deg): steered the other way")
         return float(np.clip(s.tilt_gain * steer, -s.tilt_speed, s.tilt_speed))
 
     def _tighten(self, obs: Observation) -> Command:

@@ -158,6 +158,30 @@ def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lev
         pytest.approx(-np.deg2rad(2.0))
 
 
+def test_tilt_steering_that_turns_the_tilt_further_steers_the_other_way():
+    """The lever model's way is checked against the tilt seen: grown by STEER_WORSE beyond the least
+    seen after the pusher slid STEER_TRIAL along the grasp axis, the sense flips (and back again)."""
+    from dmg_executor.controller import STEER_TRIAL, STEER_WORSE, SteeringCheck
+
+    places = np.linspace(0.0, 4 * STEER_TRIAL, 41)
+    shrinking = SteeringCheck()
+    assert all(shrinking.update(tilt, place) == 1.0
+               for tilt, place in zip(np.linspace(np.deg2rad(2.0), 0.0, 41), places))
+    assert shrinking.flips == 0
+    # Growing, but within STEER_WORSE of the least seen: pose noise, no flip.
+    noisy = SteeringCheck()
+    assert all(noisy.update(np.deg2rad(0.5) + STEER_WORSE * 0.9 * (k % 2), place) == 1.0
+               for k, place in enumerate(places))
+    # Growing past STEER_WORSE: no flip before the pusher has slid STEER_TRIAL, one flip at the first sample after.
+    growing = SteeringCheck()
+    senses = [growing.update(tilt, place) for tilt, place in zip(np.linspace(0.0, 2 * STEER_WORSE, 41), places)]
+    first = senses.index(-1.0)
+    assert places[first] >= STEER_TRIAL and np.linspace(0.0, 2 * STEER_WORSE, 41)[first] > STEER_WORSE
+    assert growing.flips == 1 and set(senses[first:]) == {-1.0}     # the trial starts again from the flip
+    # Steered the other way the tilt shrinks: it stays that way.
+    assert growing.update(np.deg2rad(0.5), places[-1] - STEER_TRIAL) == -1.0 and growing.flips == 1
+
+
 def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_line():
     from dmg_executor.controller import LEADING_TIP, leading_tip
 
@@ -1726,6 +1750,41 @@ def test_a_rotation_pushers_sweep_meets_a_face_across_it_not_one_it_runs_along(b
     assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, SWEEP_LIMIT) == np.inf
     # Turned the other way the pusher sweeps away from the side face: the sense follows the push's direction.
     assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, SWEEP_LIMIT) == np.inf
+
+
+def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_is_wide(loop_parts):
+    """A T held across its stem's foot and its bar's top, the fingers along the bar: through the grasp's
+    middle only the 30 mm stem is there, too narrow for any lever across or along the fingers. The push
+    line moves along the grasp axis into the bar, where the paper's push across the fingers beyond
+    their tips has its full lever (sim probe: the rotation was left 8 deg off the goal)."""
+    from dmg_executor.controller import PlanExecutor
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.objects import Box, box_union_mesh
+    from dmg_planner.primitives import Primitive, PrimitiveKind
+    from dmg_planner.transforms import apply, invert
+
+    cell, loop, _, _ = loop_parts
+    stem = Box(np.array([0.0, 0.0, 0.02]), np.array([0.03, 0.04, 0.04]))      # 30 x 40 x 40 mm
+    bar = Box(np.array([0.0, 0.0, 0.05]), np.array([0.1, 0.04, 0.02]))        # 100 x 40 x 20 mm on top
+    surface = ObjectSurface(*box_union_mesh([stem, bar]), mass=0.1)
+    held = np.eye(4)      # gripper 1 in the T's frame: grasp axis along its z, fingers along -x, tips at the middle
+    held[:3, :3], held[:3, 3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], [0.0, 0.0, 0.03]
+    turned = held.copy()
+    turned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, np.deg2rad(30.0)]).as_matrix() @ held[:3, :3]
+    foot, top = np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 0.06])
+    rotation = Primitive(PrimitiveKind.ROTATION, np.deg2rad(30.0), np.zeros(3), foot, foot, 0.0, np.deg2rad(30.0),
+                         top, top, turned)
+    cell.reset("box")
+    executor = PlanExecutor(ExecutorSettings.defaults(), surface, [rotation], 0, 1.0, cell.time)
+    observed = loop.observe()
+    executor.update(type(observed)(observed.time, observed.holder, observed.pusher, invert(held), observed.time, 0.06))
+    assert executor.push is not None, executor.result
+    push = executor.push.contact
+    assert push.point[2] > 0.04 + 1e-6, push.point          # on the bar
+    in_holder = apply(invert(held), push.point)           # across the fingers, the full lever beyond the tips
+    assert abs(push.direction @ [0.0, 1.0, 0.0]) > 0.99 and in_holder[2] == pytest.approx(
+        ExecutorSettings.defaults().push_depth, abs=1e-3), (push, in_holder)
 
 
 def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned_again(loop_parts, box_surface):
