@@ -59,10 +59,6 @@ LEADING_TIP = 0.5      # tips one behind the other: the one ahead along the push
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
 TURN_GAIN = np.deg2rad(1.0)   # the object turning this much with the pusher is progress (pose noise: up to 0.5 deg)
-# Tilt steering that has slid the pusher this far along the grasp axis while the tilt it steers grew this much
-# beyond the least seen meanwhile turns it the wrong way: it steers the other way from there.
-STEER_TRIAL = 0.003   # m
-STEER_WORSE = np.deg2rad(1.5)
 HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to where the pusher goes is headway
 UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
 FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
@@ -74,6 +70,10 @@ SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for
 PARTIAL_MISS_TURN = np.deg2rad(2.0)
 TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
 DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
+# Gripper 1's fingers forced this far [m] beyond the plan's widest grasp (and the opening the push began with) by the
+# loosened object: it is turning over in the grip. The finger width is felt blind too (sim, plug pushed blind along the
+# fingers: the fingers forced from 49.9 to 63.6 mm as it tilted 1 -> 21 deg in 6 s, the run lost at 14.9 deg).
+FORCED_OPEN = 0.002
 # A rotation's pusher turned this far, beyond the sweep that brings its tips onto the face, with the object not
 # turning 1 deg: it missed the face.
 MISSED_TURN = np.deg2rad(10.0)
@@ -317,28 +317,6 @@ def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
 
 
-@dataclass
-class SteeringCheck:
-    """Whether tilt steering's way (`tilt_steering`, a model of the frictions) turns the tilt back: where
-    the lever and the grip's reach are close, or the object's weight drags on the pusher, it can turn it
-    further (sim, a T pushed across its 60 mm grasp on its 20 mm-lever stem: 0 -> 5.9 deg as the
-    pusher slid 14 mm along the grasp axis, run lost). One per push."""
-
-    sense: float = 1.0                 # +1: as the model says; -1: the other way
-    since: float | None = None         # where the pusher was along the grasp axis when this sense began [m]
-    least: float = math.inf            # the least tilt [rad] seen since
-    flips: int = 0
-
-    def update(self, tilt: float, place: float) -> float:
-        """The sense to steer with, given the steered tilt's size now and the pusher's place along the axis."""
-        if self.since is None:
-            self.since = place
-        self.least = min(self.least, tilt)
-        if abs(place - self.since) >= STEER_TRIAL and tilt > self.least + STEER_WORSE:
-            self.sense, self.since, self.least, self.flips = -self.sense, place, tilt, self.flips + 1
-        return self.sense
-
-
 def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_reach: float) -> float:
     """Which way [rad, signed] the pusher should slide along the grasp axis x (holder frame) to turn a
     pushed object's tilt `tilt` (rotation vector) back. Sliding drags the face along x by friction
@@ -482,6 +460,7 @@ class PlanExecutor:
         self.plan_length = len(primitives)
         # The narrowest the object is between gripper 1's fingers along the plan: closed much further, they hold nothing.
         self.narrowest_grasp = min((min(p.opening_before, p.opening_after) for p in primitives), default=0.0)
+        self.widest_grasp = max((max(p.opening_before, p.opening_after) for p in primitives), default=0.0)
         self.notes: list[str] = []      # primitives that could not be finished, and why
         self.camera, self.tags = camera, tags
         self.turns = turns(settings.tilt_limit, settings.roll_limit) if camera is not None and tags is not None else None
@@ -518,7 +497,7 @@ class PlanExecutor:
         self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
         self.pushed_along = np.zeros(3)   # ... and the direction it pushed (holder frame)
         self.pushed_point: PushPoint | None = None   # ... and where on the object
-        self.steering = SteeringCheck()      # ... and whether its tilt steering turns the tilt back
+        self.pushed_opening = 0.0            # ... and gripper 1's opening then
         self.missed: list[PushPoint] = []    # rotation pushes whose pusher turned without turning the object
         self.level_index: int | None = None   # the correction that presses the object level (see level_tilt)
         self.level_axis = np.zeros(3)         # holder frame: the axis the current level push turns the object about
@@ -1534,7 +1513,8 @@ class PlanExecutor:
             # A level press the camera sees needs no turn back to be judged: the next is planned as the holder stands.
             self.pressed_turned = self.far_side and self._leveling and not self.push.blind
             self.far_side_pushed = self.far_side and not self.pressed_turned
-            self.pushed_reference, self.steering = self._push_reference(obs), SteeringCheck()
+            self.pushed_reference = self._push_reference(obs)
+            self.pushed_opening = obs.opening
             pusher = invert(obs.holder) @ obs.pusher
             self.pushed_from, self.pushed_along, self.turn_mark = pusher.copy(), self.push.local_direction.copy(), None
             self.pushed_point = self.push.contact
@@ -1582,6 +1562,11 @@ class PlanExecutor:
         holder = obs.holder
         if self._leveling:
             return self._press_level(obs)
+        forced = obs.opening - max(self.pushed_opening, self.widest_grasp)
+        if forced > FORCED_OPEN:
+            self.notes.append(f"a push of primitive {self.index} stopped: the object forced gripper 1's fingers "
+                              f"{forced * 1000:.1f} mm wider than its grasp (turning over in the grip)")
+            return self._tighten(obs)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
             if along <= s.position_tolerance:
@@ -1694,11 +1679,6 @@ class PlanExecutor:
         local = self.push.local_direction
         lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
         steer = tilt_steering(tilt, local, lever, s.grip_friction * obs.opening / 2)
-        flips = self.steering.flips
-        steer *= self.steering.update(abs(float(tilt @ np.cross(local, [1.0, 0.0, 0.0]))), float(pusher[0, 3]))
-        if self.steering.flips > flips:
-            self.notes.append(f"tilt steering of primitive {self.index} turned the object further off the grasp axis "
-                              f"({np.rad2deg(self.steering.least):.1f} deg): steered the other way")
         return float(np.clip(s.tilt_gain * steer, -s.tilt_speed, s.tilt_speed))
 
     def _tighten(self, obs: Observation) -> Command:

@@ -158,30 +158,6 @@ def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lev
         pytest.approx(-np.deg2rad(2.0))
 
 
-def test_tilt_steering_that_turns_the_tilt_further_steers_the_other_way():
-    """The lever model's way is checked against the tilt seen: grown by STEER_WORSE beyond the least
-    seen after the pusher slid STEER_TRIAL along the grasp axis, the sense flips (and back again)."""
-    from dmg_executor.controller import STEER_TRIAL, STEER_WORSE, SteeringCheck
-
-    places = np.linspace(0.0, 4 * STEER_TRIAL, 41)
-    shrinking = SteeringCheck()
-    assert all(shrinking.update(tilt, place) == 1.0
-               for tilt, place in zip(np.linspace(np.deg2rad(2.0), 0.0, 41), places))
-    assert shrinking.flips == 0
-    # Growing, but within STEER_WORSE of the least seen: pose noise, no flip.
-    noisy = SteeringCheck()
-    assert all(noisy.update(np.deg2rad(0.5) + STEER_WORSE * 0.9 * (k % 2), place) == 1.0
-               for k, place in enumerate(places))
-    # Growing past STEER_WORSE: no flip before the pusher has slid STEER_TRIAL, one flip at the first sample after.
-    growing = SteeringCheck()
-    senses = [growing.update(tilt, place) for tilt, place in zip(np.linspace(0.0, 2 * STEER_WORSE, 41), places)]
-    first = senses.index(-1.0)
-    assert places[first] >= STEER_TRIAL and np.linspace(0.0, 2 * STEER_WORSE, 41)[first] > STEER_WORSE
-    assert growing.flips == 1 and set(senses[first:]) == {-1.0}     # the trial starts again from the flip
-    # Steered the other way the tilt shrinks: it stays that way.
-    assert growing.update(np.deg2rad(0.5), places[-1] - STEER_TRIAL) == -1.0 and growing.flips == 1
-
-
 def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_line():
     from dmg_executor.controller import LEADING_TIP, leading_tip
 
@@ -1819,6 +1795,36 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     following = executor.push.contact
     assert following is not None and not (np.linalg.norm(following.point - missed.point) < MISSED_NEAR[0]
                                           and following.direction @ missed.direction > MISSED_NEAR[1])
+
+
+@pytest.mark.parametrize("widened, stops", [(0.001, False), (0.003, True)])
+def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its_grasp(loop_parts, box_surface,
+                                                                                        widened, stops):
+    """The fingers' opening is felt even when the camera sees nothing: an object turning over in the
+    loosened grip spreads them. Reported FORCED_OPEN wider than the plan's widest grasp mid-push, the
+    push stops within a tick (grip to the hold force, a note) and the run goes on; 1 mm wider, it does not."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import FORCED_OPEN
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    deadline, widest = cell.time + 60.0, executor.widest_grasp
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
+        _tick(loop, executor)
+    assert executor.phase == "push", (executor.step, executor.result)
+    loop.perceive()
+    observation = loop.observe()
+    spread = replace(observation, opening=max(observation.opening, widest) + widened)
+    command = executor.update(spread)
+    assert (executor.phase == "tighten") is stops, (executor.phase, widest, observation.opening)
+    noted = [note for note in executor.notes if "forced gripper 1's fingers" in note]
+    if stops:
+        assert FORCED_OPEN < widened and command.holder_grip.max_force == executor.settings.hold_force
+        assert len(noted) == 1 and "3.0 mm wider" in noted[0], executor.notes
+        assert not executor.done     # the run goes on
+    else:
+        assert not noted and command.holder_grip.max_force < executor.settings.hold_force
 
 
 def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(loop_parts, box_surface):
