@@ -312,6 +312,11 @@ def _slid_since(reference: np.ndarray, now: np.ndarray) -> float:
     return float(np.linalg.norm(invert(now)[:3, 3] - invert(reference)[:3, 3]))
 
 
+def _on_grasp_axis(holder_in_object: np.ndarray, height: float) -> np.ndarray:
+    """The point `height` [m] along the grasp axis from the grasp's middle (object frame)."""
+    return holder_in_object[:3, 3] + height * holder_in_object[:3, 0]
+
+
 def _turned_since(reference: np.ndarray, now: np.ndarray) -> float:
     """How far [rad] the object turned about the grasp axis from pose `reference` to `now` (holder frame)."""
     return _rotation_about_axis(now[:3, :3] @ reference[:3, :3].T)
@@ -1046,7 +1051,7 @@ class PlanExecutor:
         paper = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
         problems = []
         for height in (0.0, *OFF_MIDDLE_SHARES * obs.opening / 2):
-            if height and not self.surface.inside((holder_in_object[:3, 3] + height * holder_in_object[:3, 0])[None])[0]:
+            if height and not self.surface.inside(_on_grasp_axis(holder_in_object, height)[None])[0]:
                 continue     # (the axis crosses a hollow there)
             faces = self._face_pushes(obs, holder_in_object, height)
             faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(SAME_PUSH)]
@@ -1108,8 +1113,7 @@ class PlanExecutor:
         goes to `problems`."""
         s = self.settings
         holder_in_object = invert(obs.object_in_holder)
-        # On the grasp axis (object frame): the torque about the axis is the same at any height.
-        middle = holder_in_object[:3, 3] + height * holder_in_object[:3, 0]
+        middle = _on_grasp_axis(holder_in_object, height)   # (the torque about the axis is the same at any height)
         palm = -holder_in_object[:3, 2]
         palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
         ranked = []
@@ -1149,8 +1153,7 @@ class PlanExecutor:
         round the grasp axis `height` [m] along it from the grasp's middle, one per face."""
         angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
         rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
-        centre = holder_in_object[:3, 3] + height * holder_in_object[:3, 0]
-        normals = exit_normals(self.surface, centre, rays @ holder_in_object[:3, :3].T)
+        normals = exit_normals(self.surface, _on_grasp_axis(holder_in_object, height), rays @ holder_in_object[:3, :3].T)
         pushes = -(normals[np.isfinite(normals).all(axis=1)] @ obs.object_in_holder[:3, :3].T)
         pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
         lengths = np.linalg.norm(pushes, axis=1)
