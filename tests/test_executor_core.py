@@ -1733,6 +1733,8 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     middle only the 30 mm stem is there, too narrow for any lever across or along the fingers. The push
     line moves along the grasp axis into the bar, where the paper's push across the fingers beyond
     their tips has its full lever (sim probe: the rotation was left 8 deg off the goal)."""
+    from dataclasses import replace
+
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
@@ -1754,7 +1756,8 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     cell.reset("box")
     executor = PlanExecutor(ExecutorSettings.defaults(), surface, [rotation], 0, 1.0, cell.time)
     observed = loop.observe()
-    executor.update(type(observed)(observed.time, observed.holder, observed.pusher, invert(held), observed.time, 0.06))
+    executor.update(replace(observed, object_in_holder=invert(held), object_time=observed.time, opening=0.06,
+                            object_covariance=None))
     assert executor.push is not None, executor.result
     push = executor.push.contact
     assert push.point[2] > 0.04 + 1e-6, push.point          # on the bar
