@@ -1320,6 +1320,32 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
     assert events.count("turn") < events.count("press, turned"), events
 
 
+@pytest.mark.parametrize("presses, tilt_deg, finished", [(1, 2.0, False), (2, 2.6, False), (2, 2.0, True),
+                                                         (3, 2.6, True)])
+def test_a_third_level_press_is_made_only_for_a_grasp_not_yet_near_the_goal(loop_parts, box_surface, presses,
+                                                                             tilt_deg, finished):
+    """Level presses go on while the grasp axis is tilted more than `level_tilt_deg` off the goal's: a second
+    press always, a third only while the tilt is more than SETTLED_SHARE of the goal's angle tolerance (2.4 deg
+    of 3 here), and never a fourth."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import LEVEL_PUSHES, SETTLED_SHARE
+    from dmg_planner.transforms import invert
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface, length=0.005)
+    assert LEVEL_PUSHES == 2 and SETTLED_SHARE * executor.settings.goal_angle_tolerance == pytest.approx(np.deg2rad(2.4))
+    executor.primitives.append(replace(executor.primitives[-1]))      # the level press after the plan
+    executor.index = executor.level_index = len(executor.primitives) - 1
+    executor.level_began, executor.pushes = np.deg2rad(tilt_deg + 1.0), presses
+    tilted = invert(executor.primitives[-1].gripper_after)           # the goal's grasp, its axis tilted about y
+    tilted[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ tilted[:3, :3]
+    loop.perceive()
+    observation = replace(loop.observe(), object_in_holder=tilted, object_time=cell.time)
+    assert np.rad2deg(executor._error_and_tolerance(observation)[0]) == pytest.approx(tilt_deg, abs=0.01)
+    assert executor._primitive_finished(observation) is finished
+
+
 def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
     """A push line that leaves the space kept free round the object through its palm end would bring
     the pusher 300 mm up along gripper 1's hand and arm (sim: 12 s with the object unseen, then
