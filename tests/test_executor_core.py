@@ -1322,8 +1322,8 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
 
 @pytest.mark.parametrize("presses, tilt_deg, finished", [(1, 2.0, False), (2, 2.6, False), (2, 2.0, True),
                                                          (3, 2.6, True)])
-def test_a_third_level_press_is_made_only_for_a_grasp_not_yet_near_the_goal(loop_parts, box_surface, presses,
-                                                                             tilt_deg, finished):
+def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_tolerance_is_tilt(
+        loop_parts, box_surface, presses, tilt_deg, finished):
     """Level presses go on while the grasp axis is tilted more than `level_tilt_deg` off the goal's: a second
     press always, a third only while the tilt is more than SETTLED_SHARE of the goal's angle tolerance (2.4 deg
     of 3 here), and never a fourth."""
