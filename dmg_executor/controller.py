@@ -74,6 +74,12 @@ DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan'
 # loosened object: it is turning over in the grip. The finger width is felt blind too (sim, plug pushed blind along the
 # fingers: the fingers forced from 49.9 to 63.6 mm as it tilted 1 -> 21 deg in 6 s, the run lost at 14.9 deg).
 FORCED_OPEN = 0.002
+# A push stops (grip to the hold force, the rest planned from where the object is) once the object, seen for certain,
+# has tilted this share of `slip_angle` off the grasp axis since the push began; past `slip_angle` the run ends SLIP
+# (sim, a stepped block pushed along its fingers: the tilt grew 0 -> 6.3 deg in 3.5 s of one push while tilt steering
+# slid the pusher 10 mm along the axis - SLIP at every alpha; with the arms 40 % slower the same push stopped at 5.2 deg,
+# and a level press took it back).
+PUSH_TILT_STOP = 2.0 / 3.0
 # A rotation's pusher turned this far, beyond the sweep that brings its tips onto the face, with the object not
 # turning 1 deg: it missed the face.
 MISSED_TURN = np.deg2rad(10.0)
@@ -1575,6 +1581,11 @@ class PlanExecutor:
             self.notes.append(f"a push of primitive {self.index} stopped: the object forced gripper 1's fingers "
                               f"{forced * 1000:.1f} mm wider than its grasp (turning over in the grip)")
             return self._tighten(obs)
+        tilted = self._tilted_since_push(obs.object_in_holder) if self._fresh(obs) else 0.0
+        if tilted > PUSH_TILT_STOP * s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
+            self.notes.append(f"a push of primitive {self.index} stopped: the object tilted {np.rad2deg(tilted):.1f} deg "
+                              "off the grasp axis")
+            return self._tighten(obs)
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
             if along <= s.position_tolerance:
@@ -1991,6 +2002,11 @@ class PlanExecutor:
         return all(moved <= s.slip_distance and turned <= s.slip_angle
                    for moved, turned in (distance(pose, poses[-1]) for pose in poses[:-1]))
 
+    def _tilted_since_push(self, object_in_holder: np.ndarray) -> float:
+        """rad the pushed object has turned about axes across the grasp axis since the push began."""
+        change = Rotation.from_matrix(object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
+        return float(np.linalg.norm(change[1:]))
+
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
         its position), or tilted while pushed (by a pose certain enough of its tilt; once the grip has
@@ -2006,8 +2022,7 @@ class PlanExecutor:
                                       f"uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
                                       f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
         elif self.pushed_reference is not None and self._pushing():
-            change = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
-            tilt = float(np.linalg.norm(change[1:]))
+            tilt = self._tilted_since_push(obs.object_in_holder)
             if tilt > s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
                 return Outcome.SLIP, (f"the pushed object tilted {np.rad2deg(tilt):.1f} deg off the grasp axis "
                                       f"during primitive {self.index} (that pose's uncertainty "

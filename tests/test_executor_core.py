@@ -1858,6 +1858,38 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
         assert not noted and command.holder_grip.max_force < executor.settings.hold_force
 
 
+@pytest.mark.parametrize("tilt_deg, stops", [(4.5, True), (3.0, False)])
+def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts, box_surface, tilt_deg, stops):
+    """A pushed object seen for certain tilted PUSH_TILT_STOP of `slip_angle_deg` (4 of 6 deg) off the grasp axis
+    since the push began stops the push within the tick (grip to the hold force, a note) and the run goes on,
+    rather than pushing on into a SLIP; 3 deg, the push goes on."""
+    from dataclasses import replace
+
+    from dmg_executor.controller import PUSH_TILT_STOP
+
+    cell, loop, _, _ = loop_parts
+    executor = _translation_executor(loop_parts, box_surface)
+    deadline = cell.time + 60.0
+    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
+        _tick(loop, executor)
+    assert executor.phase == "push", (executor.step, executor.result)
+    assert np.rad2deg(PUSH_TILT_STOP * executor.settings.slip_angle) == pytest.approx(4.0)
+    loop.perceive()
+    observation = loop.observe()
+    tilted = executor.pushed_reference.copy()      # turned about gripper 1's y, through the object's origin
+    tilted[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ tilted[:3, :3]
+    command = executor.update(replace(observation, object_in_holder=tilted, object_time=observation.time,
+                                      object_covariance=None))
+    assert (executor.phase == "tighten") is stops, executor.phase
+    noted = [note for note in executor.notes if "tilted" in note and "stopped" in note]
+    if stops:
+        assert command.holder_grip.max_force == executor.settings.hold_force
+        assert len(noted) == 1 and f"tilted {tilt_deg:.1f} deg" in noted[0], executor.notes
+        assert not executor.done     # the run goes on
+    else:
+        assert not noted and command.holder_grip.max_force < executor.settings.hold_force
+
+
 def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(loop_parts, box_surface):
     """Backing out after a push, and again on its way home after the last one, the pushing arm stops
     (a joint at its limit): after `stall_time` the run goes on from there, and ends there, with
