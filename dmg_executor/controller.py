@@ -75,7 +75,8 @@ DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan'
 # fingers: the fingers forced from 49.9 to 63.6 mm as it tilted 1 -> 21 deg in 6 s, the run lost at 14.9 deg).
 FORCED_OPEN = 0.002
 # A push stops (grip to the hold force, the rest planned from where the object is) once the object, seen for certain,
-# has tilted this share of `slip_angle` off the grasp axis since the push began; past `slip_angle` the run ends SLIP
+# has tilted this share of `slip_angle` off the grasp axis since the push began; a pose past `slip_angle` is the SLIP
+# rule's (slip_poses of them in a row end the run; a lone one is a stray pose), not this one's
 # (sim, a stepped block pushed along its fingers: the tilt grew 0 -> 6.3 deg in 3.5 s of one push while tilt steering
 # slid the pusher 10 mm along the axis - SLIP at every alpha; with the arms 40 % slower the same push stopped at 5.2 deg,
 # and a level press took it back).
@@ -1582,7 +1583,7 @@ class PlanExecutor:
                               f"{forced * 1000:.1f} mm wider than its grasp (turning over in the grip)")
             return self._tighten(obs)
         tilted = self._tilted_since_push(obs.object_in_holder) if self._fresh(obs) else 0.0
-        if tilted > PUSH_TILT_STOP * s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
+        if PUSH_TILT_STOP * s.slip_angle < tilted <= s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
             self.notes.append(f"a push of primitive {self.index} stopped: the object tilted {np.rad2deg(tilted):.1f} deg "
                               "off the grasp axis")
             return self._tighten(obs)

@@ -1858,11 +1858,12 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
         assert not noted and command.holder_grip.max_force < executor.settings.hold_force
 
 
-@pytest.mark.parametrize("tilt_deg, stops", [(4.5, True), (3.0, False)])
+@pytest.mark.parametrize("tilt_deg, stops", [(4.5, True), (3.0, False), (8.0, False)])
 def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts, box_surface, tilt_deg, stops):
     """A pushed object seen for certain tilted PUSH_TILT_STOP of `slip_angle_deg` (4 of 6 deg) off the grasp axis
     since the push began stops the push within the tick (grip to the hold force, a note) and the run goes on,
-    rather than pushing on into a SLIP; 3 deg, the push goes on."""
+    rather than pushing on into a SLIP; 3 deg, the push goes on; one pose past 6 deg is the SLIP rule's (a slip
+    after `slip_poses` in a row, see the test above), the push goes on."""
     from dataclasses import replace
 
     from dmg_executor.controller import PUSH_TILT_STOP
