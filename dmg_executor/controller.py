@@ -1579,14 +1579,11 @@ class PlanExecutor:
             return self._press_level(obs)
         forced = obs.opening - max(self.pushed_opening, self.widest_grasp)
         if forced > FORCED_OPEN:
-            self.notes.append(f"a push of primitive {self.index} stopped: the object forced gripper 1's fingers "
-                              f"{forced * 1000:.1f} mm wider than its grasp (turning over in the grip)")
-            return self._tighten(obs)
+            return self._stop_push(obs, f"the object forced gripper 1's fingers {forced * 1000:.1f} mm wider than its "
+                                        "grasp (turning over in the grip)")
         tilted = self._tilted_since_push(obs.object_in_holder) if self._fresh(obs) else 0.0
         if PUSH_TILT_STOP * s.slip_angle < tilted <= s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
-            self.notes.append(f"a push of primitive {self.index} stopped: the object tilted {np.rad2deg(tilted):.1f} deg "
-                              "off the grasp axis")
-            return self._tighten(obs)
+            return self._stop_push(obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
             if along <= s.position_tolerance:
@@ -1700,6 +1697,11 @@ class PlanExecutor:
         lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
         steer = tilt_steering(tilt, local, lever, s.grip_friction * obs.opening / 2)
         return float(np.clip(s.tilt_gain * steer, -s.tilt_speed, s.tilt_speed))
+
+    def _stop_push(self, obs: Observation, why: str) -> Command:
+        """End the push early, saying why in the result; the rest is planned from where the object is."""
+        self.notes.append(f"a push of primitive {self.index} stopped: {why}")
+        return self._tighten(obs)
 
     def _tighten(self, obs: Observation) -> Command:
         self.phase = "tighten"
