@@ -1350,7 +1350,8 @@ class PlanExecutor:
 
     def _look_around(self, obs: Observation) -> Command:
         """Look for the held object (it has not moved since it was last seen): turn the pusher where
-        it stands through its best view and the others that see a tag, each for `stale_after`; then
+        it stands through its best view and the others that see a tag, each for `stale_after` (seeking a
+        certain pose: until a pose seen from it arrives); then
         go to the vantage places round the grasp axis the most tags are seen from
         (`_vantage_places`), up to LOOK_PLACES, and do the same at each. A view the arm stops more
         than VIEW_SHORT short of drops the place's views further than that from where it got to.
@@ -1379,7 +1380,8 @@ class PlanExecutor:
         if short < WAYPOINT_TURN_TOLERANCE or self._stalled(obs, look.place, look.views[0]):   # (as far as the arm turns)
             if look.since is None:
                 look.since = obs.time
-            elif obs.time - look.since > self.settings.stale_after:
+            elif obs.time - look.since > self.settings.stale_after or (self.seeking_certain and self._seen_since(look.since)):
+                # (seeking a certain pose, a view's first pose is its say: a still object looks the same from it)
                 if self.seeking_certain and self._certain_from_views(look):
                     return command
                 look.views.pop(0)
@@ -1390,13 +1392,17 @@ class PlanExecutor:
                                   if turn_between(view, obs.pusher[:3, :3]) <= VIEW_SHORT]
         return command
 
+    def _seen_since(self, since: float) -> bool:
+        seen = self.last
+        return seen.object_in_holder is not None and self._fresh(seen) and seen.object_time >= since
+
     def _certain_from_views(self, look: _Look) -> bool:
         """Looking for a certain pose: take the last pose seen from this view; once the mean of those from
         the last VIEW_POSES views is certain of its position (independent errors: sigma / sqrt(n)), hold it and
         end the look (sim, plug: every view of 15 at three places gave 1.0-1.3 mm against a 1 mm limit,
         38 s of looking for nothing better)."""
         seen = self.last
-        if seen.object_in_holder is None or not self._fresh(seen) or seen.object_time < look.since:
+        if not self._seen_since(look.since):
             return False
         look.poses.append((seen.object_in_holder.copy(), seen.object_position_sigma))
         taken = look.poses[-VIEW_POSES:]     # (views from one place see much alike: no more than a few count)
