@@ -1528,7 +1528,9 @@ def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_w
     """From the box's first push on, the camera's poses are made uncertain - while the executor is not
     looking for a certain one (found elsewhere), or throughout: before it judges the last primitive it
     looks for one; 1.5 mm poses from a few views average to a certain one; 3 mm ones do not, and where no
-    place gives one it judges from the uncertain pose and says so, never taking a seen object for lost."""
+    place gives one it judges from the uncertain pose and says so, never taking a seen object for lost.
+    Each view is left once a pose seen from it has come (the object is still: waiting `stale_after` there
+    shows nothing new)."""
     from dataclasses import replace
 
     from dmg_executor.controller import Outcome
@@ -1537,20 +1539,26 @@ def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_w
     executor = _translation_executor(loop_parts, box_surface)
     certain = np.diag([0.0002, 0.0002, 0.0002, 0.002, 0.002, 0.002]) ** 2
     uncertain = np.diag([uncertain_mm / 1000] * 3 + [0.002] * 3) ** 2
-    sought, pushed, ends = False, False, cell.time + 150.0
+    sought, pushed, ends, dwells = False, False, cell.time + 150.0, []
     while not executor.done and cell.time < ends:
         loop.perceive()
         observation = loop.observe()
         looking_elsewhere = certain_elsewhere and executor.seeking_certain
         pushed = pushed or executor.step.name == "EXECUTE"
         covariance = uncertain if pushed and not looking_elsewhere else certain
+        look = executor.looking
+        since = None if look is None or not executor.seeking_certain else look.since
         loop.apply(executor.update(replace(observation, object_covariance=covariance)))
+        if since is not None and executor.looking is look and look.since is None:    # left that view
+            dwells.append(cell.time - since)
         sought = sought or executor.seeking_certain
         cell.run(loop.control_period)
     result = executor.result
     assert result is not None and sought, result
     assert result.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), result.message
     assert "judged from" not in result.message if judged is None else judged in result.message, result.message
+    assert dwells or judged is None
+    assert max(dwells, default=0.0) < executor.settings.stale_after / 2, dwells
 
 
 def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_poses_after_it_agree(
