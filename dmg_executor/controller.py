@@ -1381,7 +1381,7 @@ class PlanExecutor:
             if look.since is None:
                 look.since = obs.time
             elif obs.time - look.since > self.settings.stale_after or (self.seeking_certain and self._seen_since(look.since)):
-                # (seeking a certain pose, a view's first pose is its say: a still object looks the same from it)
+                # (seeking a certain pose, the first pose from a view is all it adds: the object is held still)
                 if self.seeking_certain and self._certain_from_views(look):
                     return command
                 look.views.pop(0)
@@ -1397,10 +1397,10 @@ class PlanExecutor:
         return seen.object_in_holder is not None and self._fresh(seen) and seen.object_time >= since
 
     def _certain_from_views(self, look: _Look) -> bool:
-        """Looking for a certain pose: take the last pose seen from this view; once the mean of those from
-        the last VIEW_POSES views is certain of its position (independent errors: sigma / sqrt(n)), hold it and
-        end the look (sim, plug: every view of 15 at three places gave 1.0-1.3 mm against a 1 mm limit,
-        38 s of looking for nothing better)."""
+        """Looking for a certain pose: take the pose seen from this view since the pusher got there; once the
+        mean of those from the last VIEW_POSES views is certain of its position (independent errors:
+        sigma / sqrt(n)), hold it and end the look (sim, plug: every view of 15 at three places gave
+        1.0-1.3 mm against a 1 mm limit, 38 s of looking for nothing better)."""
         seen = self.last
         if not self._seen_since(look.since):
             return False
