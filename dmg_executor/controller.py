@@ -1393,6 +1393,7 @@ class PlanExecutor:
         return command
 
     def _seen_since(self, since: float) -> bool:
+        """Has a fresh pose from an image taken at or after `since` come?"""
         seen = self.last
         return seen.object_in_holder is not None and self._fresh(seen) and seen.object_time >= since
 
@@ -1697,7 +1698,7 @@ class PlanExecutor:
         if (s.tilt_gain == 0.0 or self.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
                 or obs.time - obs.object_time > s.stale_after):
             return 0.0
-        tilt = Rotation.from_matrix(obs.object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
+        tilt = self._turn_since_push(obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
         local = self.push.local_direction
         lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
@@ -2011,10 +2012,13 @@ class PlanExecutor:
         return all(moved <= s.slip_distance and turned <= s.slip_angle
                    for moved, turned in (distance(pose, poses[-1]) for pose in poses[:-1]))
 
+    def _turn_since_push(self, object_in_holder: np.ndarray) -> np.ndarray:
+        """Rotation vector (holder frame) the pushed object has turned by since the push began."""
+        return Rotation.from_matrix(object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
+
     def _tilted_since_push(self, object_in_holder: np.ndarray) -> float:
         """rad the pushed object has turned about axes across the grasp axis since the push began."""
-        change = Rotation.from_matrix(object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
-        return float(np.linalg.norm(change[1:]))
+        return float(np.linalg.norm(self._turn_since_push(object_in_holder)[1:]))
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
