@@ -14,7 +14,8 @@ Every primitive is done in one or more pushes, each an explicit sequence of step
                 While pushing, the object pose is the last seen one moved on by the
                 pusher's motion since its image (reckoning): a push the camera cannot
                 watch goes on blind and the next pose checks it.
-  LEAVE         the pusher backs out along the push line.
+  LEAVE         the pusher backs out along the push line (a straddle push's: off the face, then
+                out along its fingers the way it came in, and closes them).
 
 The target of primitive k is the object pose in the holder's frame that puts the gripper at
 the primitive's `gripper_after` (the planner's gripper pose in the object frame), so errors
@@ -35,7 +36,7 @@ from scipy.spatial.transform import Rotation
 from dmg_executor.ects import arm_twists
 from dmg_executor.grip import tilt_hold_force
 from dmg_executor.push_points import (SLANT_LIMIT_DEG, ObjectSurface, PushError, PushPoint, exit_normals, rotation_push,
-                                      translation_push)
+                                      straddle_push, translation_push)
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
@@ -132,6 +133,15 @@ LEVEL_SLIDE = 0.002
 LEVEL_LEVERS = np.array([0.035, 0.025])
 LEVEL_OFF_AXIS = np.deg2rad([0.0, 30.0, -30.0])
 LEVEL_REACH_COSINE = np.cos(np.deg2rad(50.0))   # a press at most this far off the way the pusher's fingers point at home
+# A translation out of the grip towards the fingertips is pushed on the object's palm side, where gripper 1's fingers
+# are: the pusher's fingertips open either side of them (a straddle push), each this far [m] beyond touching them
+# (tip against finger, across the fingers; the nearest that fits first: one tip meeting the face late turns the object
+# less the nearer it is), the line between them at most STRADDLE_TWIST from across the fingers (an object turned in
+# the grip: the tips are lined up with it), the pusher's fingers along gripper 1's grasp axis, at most
+# STRADDLE_FINGERS off.
+STRADDLE_MARGINS = np.array([0.004, 0.012, 0.024])
+STRADDLE_TWIST = np.deg2rad(15.0)
+STRADDLE_FINGERS = np.cos(np.deg2rad(30.0))
 VIEW_POSES = 4        # a look for a certain pose averages the poses from at most this many of its last views
 FRUITLESS_NEAR = 0.02   # m: a place this close to one a look saw nothing from counts as that one (vantage places are 5 cm or more apart)
 
@@ -364,23 +374,26 @@ def leading_tip(direction: np.ndarray, orientation: np.ndarray, tip_radius: floa
 
 
 def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, orientation: np.ndarray,
-               tip_radius: float, gap: float) -> np.ndarray:
+               tip_radius: float, gap: float, spread: float = 0.0) -> np.ndarray:
     """Where the pusher's grasp frame (turned `orientation`) starts a push along `direction` on `point`
     of a face with outward `normal`: the fingertip nearer the face, when clearly so (_tip_ahead), on
     the line along `direction` on which it meets the face at `point`, and neither tip nearer than
     `gap` along that line to the face's plane. Set back from the push line alone, tips side by side
     on a face slanted to the push are not equally far from it (sim, box face slanted 41 deg: the
     other tip started 3 mm inside it, pressed 21 N into it against the closed grip, and the box
-    jumped 2.3 mm / 2.1 deg the wrong way when the grip loosened)."""
-    met = point + tip_radius * normal - _tip_ahead(-normal, orientation, tip_radius)   # that tip touching `point`
-    tips = met + _tip_centres(orientation, tip_radius)
+    jumped 2.3 mm / 2.1 deg the wrong way when the grip loosened). `spread`: the tips opened that far
+    apart (a straddle push: side by side across it, the point half way between them)."""
+    ahead = np.zeros(3) if spread else _tip_ahead(-normal, orientation, tip_radius)
+    met = point + tip_radius * normal - ahead   # that tip touching `point`
+    tips = met + _tip_centres(orientation, tip_radius, spread)
     # How far each tip travels along `direction` before it touches the face's plane.
     slant = max(-float(direction @ normal), np.cos(np.deg2rad(SLANT_LIMIT_DEG)))
     travel = ((tips - point) @ normal - tip_radius) / slant
     return met - (gap - min(float(travel.min()), 0.0)) * direction
 
 
-def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
+def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius: float,
+                     spread: float = 0.0) -> np.ndarray:
     """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) on both fingertips'
     spheres facing the push `direction`: the front and rims TIP_RIMS off it, TIP_RIM_TURNS round.
     The first of them to meet the object along the push is where a tip meets it."""
@@ -390,14 +403,15 @@ def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius:
     tilt, turn = np.meshgrid(TIP_RIMS, TIP_RIM_TURNS)
     facing = (np.cos(tilt).reshape(-1, 1) * direction
               + np.sin(tilt).reshape(-1, 1) * (np.cos(turn).reshape(-1, 1) * side + np.sin(turn).reshape(-1, 1) * other))
-    return (_tip_centres(orientation, tip_radius)[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
+    return (_tip_centres(orientation, tip_radius, spread)[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
 
 
-def fingertip_shells(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
-    """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) TIP_CLEARANCE out from both
-    fingertips' spheres, all round them: where a push starts, none may be inside the object."""
+def fingertip_shells(orientation: np.ndarray, tip_radius: float, spread: float = 0.0) -> np.ndarray:
+    """Points (n, 3; from the pusher's grasp frame turned `orientation`, its tips `spread` apart or closed)
+    TIP_CLEARANCE out from both fingertips' spheres, all round them: where a push starts, none may be
+    inside the object."""
     out = (tip_radius + TIP_CLEARANCE) * SHELL_DIRECTIONS
-    return (_tip_centres(orientation, tip_radius)[:, None, :] + out[None]).reshape(-1, 3)
+    return (_tip_centres(orientation, tip_radius, spread)[:, None, :] + out[None]).reshape(-1, 3)
 
 
 def sweep_to_touch(surface: ObjectSurface, object_pose: np.ndarray, pusher: np.ndarray, holder: np.ndarray,
@@ -418,21 +432,21 @@ def sweep_to_touch(surface: ObjectSurface, object_pose: np.ndarray, pusher: np.n
     return float(angles[touching[0]]) if len(touching) else float("inf")
 
 
-def _tip_centres(orientation: np.ndarray, tip_radius: float) -> np.ndarray:
-    """The closed pusher's two fingertip centres (2, 3; from its grasp frame turned `orientation`): side by
-    side along its x, touching."""
-    return tip_radius * np.outer([1.0, -1.0], orientation[:, 0])
+def _tip_centres(orientation: np.ndarray, tip_radius: float, spread: float = 0.0) -> np.ndarray:
+    """The pusher's two fingertip centres (2, 3; from its grasp frame turned `orientation`): side by side
+    along its x, `spread` apart, or touching (closed)."""
+    return max(tip_radius, spread / 2) * np.outer([1.0, -1.0], orientation[:, 0])
 
 
 def meeting_start(start: np.ndarray, orientation: np.ndarray, direction: np.ndarray, object_pose: np.ndarray,
-                  surface: ObjectSurface, tip_radius: float, gap: float) -> np.ndarray:
+                  surface: ObjectSurface, tip_radius: float, gap: float, spread: float = 0.0) -> np.ndarray:
     """`start` (base frame) moved along the push `direction` until the fingertip that meets the
     object (at `object_pose`) first - rays from the tips' fronts onto its mesh - is `gap` from it.
     `push_start` sets back by the face's plane: a tip whose line passes beside the face never meets
     it (sim, plug: the push line 4-6 mm above a face's edge, tips side by side across it - the other
     tip started 12-14 mm away, and blind pushes counted from `gap` ended 6-8 mm short, three in a row)."""
     inverse = invert(object_pose)
-    meet = surface.travel(apply(inverse, start + fingertip_fronts(direction, orientation, tip_radius)),
+    meet = surface.travel(apply(inverse, start + fingertip_fronts(direction, orientation, tip_radius, spread)),
                           inverse[:3, :3] @ direction)
     return start if not np.isfinite(meet) else start + (meet - gap) * direction
 
@@ -489,7 +503,9 @@ class PlanExecutor:
         self.step_started = start_time
         self.result: Result | None = None
         self.push: _Push | None = None
-        self.retreat: np.ndarray | None = None
+        self.retreat: list[np.ndarray] = []    # where the pusher backs out to after a push (base frame), in order
+        self.pusher_spread = 0.0        # m between the pusher's fingertip centres as last commanded (0: closed)
+        self.opened_at = -math.inf      # when the pusher opened for a straddle push
         self.waypoint = 0
         self.held_reference: np.ndarray | None = None   # object pose the grip must keep, or None while pushing
         self.held_sigma = 0.0                 # m, position uncertainty of that pose
@@ -645,7 +661,25 @@ class PlanExecutor:
         handler = self._finish_plan if self.returning else {
             Step.FIND_CONTACT: self._find_contact, Step.APPROACH: self._approach, Step.EXECUTE: self._execute,
             Step.LEAVE: self._leave}[self.step]
-        return handler(obs)
+        command = handler(obs)
+        spread = self._spread_wanted(obs)
+        if spread != self.pusher_spread:
+            self.pusher_spread = spread
+            command.pusher_grip = GripCommand(max(spread - 2 * s.tip_radius, 0.0), 0.0)
+        return command
+
+    def _spread_wanted(self, obs: Observation) -> float:
+        """How far apart [m] the pusher's fingertip centres should be: opened for a straddle push from where
+        its last stretch begins until it has backed out of it, else closed (0) - never closing on gripper 1's
+        fingers (the pusher still in the space kept free round them: stopped short backing out)."""
+        push = self.push
+        if push is not None and push.contact is not None and push.contact.spread and (
+                self.step in (Step.EXECUTE, Step.LEAVE)
+                or (self.step == Step.APPROACH and self.waypoint >= len(push.waypoints) - 1)):
+            return push.contact.spread
+        if self.pusher_spread and self._keep_out(obs).contains(apply(invert(obs.holder), obs.pusher[:3, 3]))[0]:
+            return self.pusher_spread
+        return 0.0
 
     def _enter(self, step: Step, obs: Observation) -> None:
         """Start a step with the grip closed: from here the object must not move in it (from the
@@ -760,13 +794,16 @@ class PlanExecutor:
             if self._leveling and self.pressed_turned:   # the next press another way: turn back, plan from there
                 self.far_side_pushed = True
                 return Command()
-            turn = self._level_turn(obs)
+            turn = self._quarter_turn(obs) if self._leveling else None
             if turn is not None:
                 return self._start_holder_turn(obs, back=False, angle=turn)
             if self._push_when_returned(primitive, obs):
                 return self._start_holder_turn(obs, back=False, home=self.holder_start)
             if self._push_when_turned(primitive, obs):
                 return self._start_holder_turn(obs, back=False)
+            turn = self._quarter_turn(obs) if primitive.kind == PrimitiveKind.TRANSLATION and not self._leveling else None
+            if turn is not None:
+                return self._start_holder_turn(obs, back=False, angle=turn)
             self.far_side_pushed = self.far_side     # (turned, and still no push: turn back)
             # No push can do (the rest of) it: the next primitive aims at its own target from here,
             # and the result says what was left and why.
@@ -802,20 +839,24 @@ class PlanExecutor:
             return False
         return True
 
-    def _level_turn(self, obs: Observation) -> float | None:
-        """Where no level press is found: the turn of the holder about its fingers (+-90 deg) after which
-        the pusher, back where it started, finds one (it presses with its fingers pointing along the grasp
-        axis, which Baxter's right arm does only about the way they point at home)."""
-        if not self._leveling or self.far_side or not self.may_turn:
+    def _quarter_turn(self, obs: Observation) -> float | None:
+        """Where no push is found: the turn of the holder about its fingers (+-90 deg) after which the pusher,
+        back where it started, finds one - a level press or a straddle push, each with the pusher's fingers
+        pointing along the grasp axis, which Baxter's right arm does only about the way they point at home.
+        (Not for other pushes a quarter turn would allow: sim, a T probe, a push along its bar so found
+        knocked it out of the grip at every alpha.)"""
+        if self.far_side or not self.may_turn:
             return None
         for angle in (np.pi / 2, -np.pi / 2):
             holder = obs.holder.copy()
             holder[:3, :3] = obs.holder[:3, :3] @ Rotation.from_rotvec([0.0, 0.0, angle]).as_matrix()
             try:
-                self._plan_push(self.primitives[self.index], replace(obs, holder=holder, pusher=self.pusher_home.copy()))
+                push = self._plan_push(self.primitives[self.index],
+                                       replace(obs, holder=holder, pusher=self.pusher_home.copy()))
             except (PushError, RouteError):
                 continue
-            return angle
+            if self._leveling or push.contact.spread:
+                return angle
         return None
 
     def _push_when_returned(self, primitive: Primitive, obs: Observation) -> bool:
@@ -871,9 +912,10 @@ class PlanExecutor:
                               f"moved {offset * 1000:.0f} mm and turned {np.rad2deg(turned):.0f} deg in the pushes) "
                               "for a push it could not be given where it was")
         elif not back:
+            what = ("a level press" if self._leveling else "a push on its far side" if abs(angle) > np.pi / 2 + 0.1
+                    else "a push from its side")
             self.notes.append(f"primitive {self.index}: the holding gripper turned the object "
-                              f"{np.rad2deg(angle):.0f} deg about its fingers for "
-                              f"{'a level press' if self._leveling else 'a push on its far side'}")
+                              f"{np.rad2deg(angle):.0f} deg about its fingers for {what}")
         self._enter(Step.FIND_CONTACT, obs)
         return Command()
 
@@ -1047,6 +1089,11 @@ class PlanExecutor:
                     pushes.append(translation_push(self.surface, middle, -(holder_in_object[:3, :3] @ direction)))
                 except PushError as error:
                     problems.append(str(error))
+            if motion[2] > s.position_tolerance and s.straddle_opening > 0.0:
+                try:
+                    pushes.append(self._straddle_push(holder_in_object))
+                except PushError as error:
+                    problems.append(str(error))
             if not pushes:
                 raise PushError("; ".join(problems))
             candidates = self._watched(obs, pushes, occluders)
@@ -1077,6 +1124,25 @@ class PlanExecutor:
                 if candidates:   # first of the best seen: the longest lever beyond the tips
                     return max(candidates, key=lambda candidate: candidate[1])[0]
         raise PushError("; ".join(problems))
+
+    def _straddle_push(self, holder_in_object: np.ndarray) -> PushPoint:
+        """The push that moves the object out along gripper 1's fingers: on its palm side, the pusher's tips
+        open either side of those fingers (`straddle_push`), on a face the pusher's fingers reach beside them
+        without meeting gripper 1's palm."""
+        s = self.settings
+        middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
+        halves = 2 * s.tip_radius + STRADDLE_MARGINS
+        halves = halves[2 * halves - 2 * s.tip_radius <= s.straddle_opening + 1e-9]
+        if not len(halves):
+            raise PushError(f"a straddle push needs the pusher open {2 * (s.tip_radius + STRADDLE_MARGINS[0]) * 1000:.0f} mm "
+                            f"(straddle_opening {s.straddle_opening * 1000:.0f} mm)")
+        push = straddle_push(self.surface, middle, rotation[:, 2], rotation[:, 1], halves, STRADDLE_TWIST)
+        depth = -float((push.point - middle) @ rotation[:, 2])     # towards the palm from the grasp's middle
+        room = s.finger_length - 2 * s.tip_radius - s.gap - s.clearance   # (its finger beside the tip, radius tip_radius)
+        if depth > room:
+            raise PushError(f"the straddle push's face is {depth * 1000:.0f} mm towards gripper 1's palm (the pusher's "
+                            f"fingers fit up to {room * 1000:.0f} mm)")
+        return push
 
     def _plan_level_push(self, obs: Observation, occluders: Occluders) -> _Push:
         """A push along the grasp axis on a face beside the grasp's middle that turns the object about the
@@ -1215,16 +1281,16 @@ class PlanExecutor:
         point_h = apply(to_holder, point)
         direction_h = to_holder[:3, :3] @ direction
         outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
-        if outside_h[2] < box.low[2]:
+        if outside_h[2] < box.low[2] and not push.spread:
             # The line leaves the kept-free space through its palm end: the pusher would come up along
             # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along "
                              "the holding gripper's hand from its palm side")
-        pusher_h = apply(to_holder, obs.pusher[:3, 3])
-        waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
-        # Where the push starts, the tips must not be spread along the grasp axis.
         provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
-        views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
+        if push.spread:
+            views, seen = self._straddling_views(obs, provisional, direction, occluders)
+        else:   # where the push starts, the tips must not be spread along the grasp axis
+            views, seen = self._views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
         # The best view whose hand keeps clear of the holding gripper (usually the first) and whose
         # fingertips start clear of the object: set back by the face's plane, a tip beside the face can be
         # inside another part of it (sim, a stepped block: a tip in the step where a push along a slanted
@@ -1237,10 +1303,11 @@ class PlanExecutor:
         sweeping = self._primitive.kind == PrimitiveKind.ROTATION and not self._leveling
         clashes = sweeps = 0
         for first, view in enumerate(views):
-            start = push_start(point, normal, direction, view, s.tip_radius, s.gap)
+            start = push_start(point, normal, direction, view, s.tip_radius, s.gap, push.spread)
             clash = self._hands_clash(start, view, occluders)
             clashes += clash
-            if clash or self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius))).any():
+            if clash or self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius,
+                                                                                      push.spread))).any():
                 continue
             near = from_rotation(view, start + (s.gap - SWEEP_BACK) * direction)
             if sweeping and not np.isfinite(sweep_to_touch(self.surface, object_pose, near, holder, direction,
@@ -1259,11 +1326,52 @@ class PlanExecutor:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would {what} "
                              "however it is turned")
         views, seen = views[first:], seen[first:]
-        start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap)
+        start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap, push.spread)
+        if push.spread:
+            outside_h = self._straddle_entry(apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
+                                             invert(obs.object_in_holder))
+        pusher_h = apply(to_holder, obs.pusher[:3, 3])
+        waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
                      _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])
+
+    def _straddling_views(self, obs: Observation, place: np.ndarray, direction: np.ndarray,
+                          occluders: Occluders) -> tuple[np.ndarray, np.ndarray]:
+        """The pusher orientations (best view first) at `place` (base frame) whose fingertips, opened, straddle
+        gripper 1's fingers for a push along `direction` (base frame): the fingers along the grasp axis (either
+        way), the tips spread across it and the push - rolled about the fingers from the nearest views the arm
+        can take (STRADDLE_TWIST at most) onto exactly that line."""
+        views, seen = self._views(obs, place, occluders=occluders)
+        grasp_axis = obs.holder[:3, 0]
+        spread = np.cross(direction, grasp_axis)
+        spread /= np.linalg.norm(spread)
+        keep = ((np.abs(views[:, :, 0] @ spread) > np.cos(STRADDLE_TWIST))
+                & (np.abs(views[:, :, 2] @ grasp_axis) > STRADDLE_FINGERS))
+        if not keep.any():
+            raise RouteError("no pusher orientation its arm can take puts its fingers along gripper 1's grasp axis "
+                             "with the tips either side of gripper 1's fingers")
+        views, seen = views[keep], seen[keep]
+        fingers = views[:, :, 2]
+        tips = spread - (fingers @ spread)[:, None] * fingers
+        tips *= np.sign(views[:, :, 0] @ spread)[:, None] / np.linalg.norm(tips, axis=1, keepdims=True)
+        return np.stack([tips, np.cross(fingers, tips), fingers], axis=2), seen
+
+    def _straddle_entry(self, start_h: np.ndarray, orientation_h: np.ndarray, spread: float, box: KeepOut,
+                        object_in_holder_inverse: np.ndarray) -> np.ndarray:
+        """Where (holder frame) a straddle push's last stretch begins: out of the kept-free space along the
+        pusher's fingers from its start, so that the open tips come in either side of gripper 1's fingers,
+        clear of the object all the way (RouteError if not)."""
+        s = self.settings
+        fingers = orientation_h[:, 2]
+        length = box.exit_distance(start_h, -fingers) + EXIT_MARGIN
+        shells = fingertip_shells(orientation_h, s.tip_radius, spread)
+        along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
+        if self.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
+            raise RouteError(f"the straddle push's open fingertips would meet the object on their way in to "
+                             f"{np.round(start_h * 1000, 1).tolist()} mm (holder frame)")
+        return start_h - length * fingers
 
     def _hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders) -> bool:
         """Would the pusher with its tips at `place`, turned `orientation`, have its hand in the holding
@@ -1299,6 +1407,8 @@ class PlanExecutor:
         return self.settings.tip_radius * (1.0 + across)
 
     def _approach(self, obs: Observation) -> Command:
+        if obs.time < self.opened_at + self.settings.grip_settle:
+            return Command()      # the pusher opening for a straddle push, where its last stretch begins
         command = self._along_route(obs)
         arrived = self._arrived(obs)
         if not arrived and self._stalled(obs):
@@ -1315,6 +1425,9 @@ class PlanExecutor:
                     return waiting
             self.waiting_since = None
             self.waypoint += 1
+            if self.push.contact is not None and self.push.contact.spread and self.waypoint == len(self.push.waypoints) - 1:
+                self.opened_at = obs.time
+                return Command()
             if self.waypoint == len(self.push.waypoints):
                 self._enter(Step.EXECUTE, obs)
                 self.phase, self.pushed_reference = "loosen", None
@@ -1696,8 +1809,8 @@ class PlanExecutor:
         (`tilt_steering`), from fresh poses certain of their tilt only."""
         s = self.settings
         if (s.tilt_gain == 0.0 or self.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
-                or obs.time - obs.object_time > s.stale_after):
-            return 0.0
+                or obs.time - obs.object_time > s.stale_after or self.push.contact.spread):
+            return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers)
         tilt = self._turn_since_push(obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
         local = self.push.local_direction
@@ -1723,26 +1836,33 @@ class PlanExecutor:
         return Command(holder=_shift(holder_twist, origin, origin), pusher=_shift(pusher_twist, origin, obs.pusher[:3, 3]))
 
     def _leave(self, obs: Observation) -> Command:
-        if self.retreat is None:
-            # Back out along the push line as the object now lies (a rotation turned it with the pusher).
+        if not self.retreat:
+            # Back out along the push line as the object now lies (a rotation turned it with the pusher); a
+            # straddle push's pusher backs off the face by `gap`, then out along its fingers the way it came in.
             turned = 0.0 if self.pushed_reference is None else _turned_since(self.pushed_reference, obs.object_in_holder)
             local = Rotation.from_rotvec([turned, 0.0, 0.0]).apply(self.push.local_direction)
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
             pusher = apply(to_holder, obs.pusher[:3, 3])
-            out = pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local
-            self.retreat = apply(obs.holder, out)
-        short = float(np.linalg.norm(self.retreat - obs.pusher[:3, 3]))
-        if short < self.settings.waypoint_tolerance or self._stalled(obs, self.retreat):
+            if self.push.contact is not None and self.push.contact.spread:
+                backed = pusher - self.settings.gap * local
+                fingers = to_holder[:3, :3] @ obs.pusher[:3, 2]
+                path = [backed, backed - (box.exit_distance(backed, -fingers) + EXIT_MARGIN) * fingers]
+            else:
+                path = [pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local]
+            self.retreat = [apply(obs.holder, point) for point in path]
+        short = float(np.linalg.norm(self.retreat[0] - obs.pusher[:3, 3]))
+        if short < self.settings.waypoint_tolerance or self._stalled(obs, self.retreat[0]):
             # Stuck on the way out (sim: 25 s in LEAVE after the last push, the grasp within tolerance),
             # the next route starts from here.
             if short >= self.settings.waypoint_tolerance:
                 self.notes.append(f"after a push of primitive {self.index} the pusher stopped backing out "
                                   f"{short * 1000:.0f} mm short")
-            self.retreat = None
-            self._enter(Step.FIND_CONTACT, obs)
+            self.retreat = self.retreat[1:]
+            if not self.retreat:
+                self._enter(Step.FIND_CONTACT, obs)
             return Command()
-        return self._go_to(obs, self.retreat, through=True)
+        return self._go_to(obs, self.retreat[0], through=True)
 
     def _keep_out(self, obs: Observation) -> KeepOut:
         s = self.settings

@@ -7,7 +7,9 @@ leaves the object, and pushes towards -t. A ROTATION r turns the finger by r abo
 outward contact normal n, so the object has to turn by -r about n relative to the gripper,
 about the grasp axis: the pusher touches the object on a line orthogonal to the grasp axis,
 `depth` beside it (the paper: across the finger, beyond the fingertips, where the object is
-free), on the side whose push turns the object the right way.
+free), on the side whose push turns the object the right way. A translation out of the grip
+towards the fingertips has its face on the palm side, where the holding fingers are: the pusher's
+two tips, opened, push it either side of them (a straddle push).
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ class PushPoint:
     point: np.ndarray       # on the surface, object frame [m]
     normal: np.ndarray      # outward surface normal there
     direction: np.ndarray   # unit direction the pusher moves (and the object with it), object frame
+    spread: float = 0.0     # m between the pusher's fingertip centres: 0 = closed (side by side, touching)
 
 
 class ObjectSurface:
@@ -129,6 +132,37 @@ def translation_push(surface: ObjectSurface, contact, translation) -> PushPoint:
     along = _unit(translation, "translation")
     # Aim at the contact from the +t side, moving towards -t: the first face met is the one to push.
     return _checked(surface, np.asarray(contact, float), -along, "translation", slant_limit=TRANSLATION_SLANT_DEG)
+
+
+def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, twist_limit: float) -> PushPoint:
+    """Push point for moving the object `along` (object frame) out of the grip towards the fingertips:
+    its face on the palm side, where the holding gripper's fingers are, is pushed by the pusher's two
+    open fingertips either side of them, a half spread from `middle` (the grasp's middle) along
+    `across` (across the fingers, away from the grasp axis). The tips go where the lines along `along`
+    meet faces that take a translation push, and push square to the line between those points (both
+    touch together: one alone would turn the object about the grasp axis), which may turn at most
+    `twist_limit` [rad] from `across` (an object turned in the grip); the smallest of `half_spreads`
+    that fits is taken. The point returned is half way between the two."""
+    along, across = _unit(along, "straddle push"), _unit(across, "straddle spread")
+    problems = []
+    for half in half_spreads:
+        try:
+            sides = [_checked(surface, np.asarray(middle, float) + sign * half * across, along, "straddle push",
+                              slant_limit=TRANSLATION_SLANT_DEG) for sign in (1.0, -1.0)]
+        except PushError as error:
+            problems.append(f"{half * 2000:.0f} mm apart: {error}")
+            continue
+        line = sides[0].point - sides[1].point
+        twist = np.arctan2(abs(float(line @ along)), float(line @ across))
+        if twist > twist_limit:
+            problems.append(f"{half * 2000:.0f} mm apart: the line between the faces either side is turned "
+                            f"{np.rad2deg(twist):.0f} deg from across the fingers")
+            continue
+        direction = along - (along @ line) / (line @ line) * line
+        normal = sides[0].normal + sides[1].normal
+        return PushPoint((sides[0].point + sides[1].point) / 2, normal / np.linalg.norm(normal),
+                         direction / np.linalg.norm(direction), float(np.linalg.norm(line)))
+    raise PushError("; ".join(problems) or "no straddle spread given")
 
 
 def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:

@@ -66,6 +66,7 @@ class ExecutorSettings:
     step_timeout: float
     stall_time: float
     blind_pushes: bool
+    straddle_opening: float
     holder_turn: float             # rad
     level_tilt: float              # rad
 

@@ -264,6 +264,30 @@ def test_push_points_that_do_not_exist_are_refused(box_surface):
         rotation_push(box_surface, **along, edge_margin=0.012)
 
 
+def test_a_straddle_push_meets_the_palm_side_face_either_side_of_the_fingers_and_pushes_square_to_it():
+    from dmg_executor.push_points import ObjectSurface, PushError, straddle_push
+    from dmg_planner.objects import box_union_mesh, load_object
+
+    # The bracket's base plate (x -60..60, y -30..30, z 0..8 mm) held across its thickness, the fingers
+    # along +y with the grasp's middle 10.5 mm in from its -y edge: the tips straddle them on that edge.
+    plate = ObjectSurface(*box_union_mesh(load_object("bracket").parts))
+    middle, halves, limit = np.array([-0.0015, -0.0105, 0.004]), [0.02, 0.028], np.deg2rad(15.0)
+    push = straddle_push(plate, middle, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit)
+    assert push.point == pytest.approx([-0.0015, -0.03, 0.004], abs=1e-6) and push.spread == pytest.approx(0.04)
+    assert push.direction == pytest.approx([0.0, 1.0, 0.0]) and push.normal == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
+    # The plate turned 8 deg in the grip: the tips line up with its edge and push square onto it.
+    turn = np.deg2rad(8.0)
+    along, across = [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0]
+    turned = straddle_push(plate, middle, along, across, halves, limit)
+    assert turned.direction == pytest.approx([0.0, 1.0, 0.0], abs=1e-6) and turned.spread == pytest.approx(0.04 / np.cos(turn))
+    with pytest.raises(PushError, match="turned 20 deg from across the fingers"):
+        turn = np.deg2rad(20.0)
+        straddle_push(plate, middle, [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0], halves, limit)
+    # 45 mm from its end, one tip would be beyond the plate at either spread.
+    with pytest.raises(PushError, match="40 mm apart: straddle push: the push line misses the object; 56 mm apart"):
+        straddle_push(plate, [-0.045, -0.0105, 0.004], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit)
+
+
 # --- routes round the object -------------------------------------------------------------------
 def test_routes_go_round_the_keep_out_box_and_prefer_the_near_side():
     from dmg_executor.routes import KeepOut, RouteError, route
@@ -1093,6 +1117,36 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     holder_after = cell.grasp_pose("arm1")                        # ... and turned back, in place, held
     assert np.rad2deg(turn_between(holder_after[:3, :3], holder_before[:3, :3])) < 3.0
     assert np.linalg.norm(holder_after[:3, 3] - holder_before[:3, 3]) < 0.01
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+
+
+def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tips_either_side_of_the_fingers(
+        bracket_run):
+    """The bracket must come 12 mm out of the grip along gripper 1's fingers: only its palm-side face, where
+    those fingers are, can be pushed. The pusher (gripper 1 turned a quarter for its fingers to point along
+    the grasp axis) pushes it with its tips open either side of gripper 1's fingers, and closes them again
+    once out of their way."""
+    from dmg_executor.controller import Outcome
+    from dmg_planner.transforms import distance, invert
+
+    cell, loop, make = bracket_run
+    executor = make(shift=(0.0, 0.0, -0.012))
+    pushing_open = []
+    original_update = executor.update
+
+    def recording_update(observation):
+        command = original_update(observation)
+        if executor.step.name == "EXECUTE" and executor.phase == "push":
+            pushing_open.append(cell.gripper_status("arm2").opening)
+        return command
+
+    executor.update = recording_update
+    outcome = loop.run(executor, time_limit=150)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert "for a push from its side" in outcome.message
+    assert max(pushing_open) > 0.02                                        # pushed with the tips opened ...
+    assert cell.gripper_status("arm2").opening < 0.002                     # ... and closed after
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
 
 
