@@ -672,14 +672,18 @@ class PlanExecutor:
         """How far apart [m] the pusher's fingertip centres should be: opened for a straddle push from where
         its last stretch begins until it has backed out of it, else closed (0) - never closing on gripper 1's
         fingers (the pusher still in the space kept free round them: stopped short backing out)."""
-        push = self.push
-        if push is not None and push.contact is not None and push.contact.spread and (
-                self.step in (Step.EXECUTE, Step.LEAVE)
-                or (self.step == Step.APPROACH and self.waypoint >= len(push.waypoints) - 1)):
-            return push.contact.spread
+        if self._push_spread and (self.step in (Step.EXECUTE, Step.LEAVE)
+                                  or (self.step == Step.APPROACH and self.waypoint >= len(self.push.waypoints) - 1)):
+            return self._push_spread
         if self.pusher_spread and self._keep_out(obs).contains(apply(invert(obs.holder), obs.pusher[:3, 3]))[0]:
             return self.pusher_spread
         return 0.0
+
+    @property
+    def _push_spread(self) -> float:
+        """The current push's fingertip spread [m] if it is a straddle push, else 0."""
+        push = self.push
+        return 0.0 if push is None or push.contact is None else push.contact.spread
 
     def _enter(self, step: Step, obs: Observation) -> None:
         """Start a step with the grip closed: from here the object must not move in it (from the
@@ -1425,7 +1429,7 @@ class PlanExecutor:
                     return waiting
             self.waiting_since = None
             self.waypoint += 1
-            if self.push.contact is not None and self.push.contact.spread and self.waypoint == len(self.push.waypoints) - 1:
+            if self._push_spread and self.waypoint == len(self.push.waypoints) - 1:
                 self.opened_at = obs.time
                 return Command()
             if self.waypoint == len(self.push.waypoints):
@@ -1809,7 +1813,7 @@ class PlanExecutor:
         (`tilt_steering`), from fresh poses certain of their tilt only."""
         s = self.settings
         if (s.tilt_gain == 0.0 or self.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
-                or obs.time - obs.object_time > s.stale_after or self.push.contact.spread):
+                or obs.time - obs.object_time > s.stale_after or self._push_spread):
             return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers)
         tilt = self._turn_since_push(obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
@@ -1844,7 +1848,7 @@ class PlanExecutor:
             box = self._keep_out(obs)
             to_holder = invert(obs.holder)
             pusher = apply(to_holder, obs.pusher[:3, 3])
-            if self.push.contact is not None and self.push.contact.spread:
+            if self._push_spread:
                 backed = pusher - self.settings.gap * local
                 fingers = to_holder[:3, :3] @ obs.pusher[:3, 2]
                 path = [backed, backed - (box.exit_distance(backed, -fingers) + EXIT_MARGIN) * fingers]

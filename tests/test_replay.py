@@ -64,12 +64,18 @@ def test_a_replayed_bag_gives_the_same_detections_from_the_same_images(tmp_path)
         replay.start_logged("perception", [DMG, "run", "dmg_perception", "perception_node",
                                            "--ros-args", "-p", "use_sim_time:=true"])
         recorder = replay.start_logged("record", [DMG, "bag", "record", *OUTPUTS, "-o", str(replay_bag)])
-        time.sleep(3.0)       # both discovered before the first replayed image
+        # Both discovered before the first replayed image: the recorder subscribes once it has seen the
+        # node's publishers (their types), and discovery under the whole suite's load takes seconds (CI:
+        # the first 2.8 s of replayed detections went unrecorded after a fixed 3 s wait).
+        subscribers = {"/perception/detections": 1, "/perception/object_pose": 2}    # (the watcher takes poses too)
+        watcher.wait_for(lambda: all(watcher.node.count_publishers(topic) and watcher.node.count_subscribers(topic) >= n
+                                     for topic, n in subscribers.items()), 60, "the replay recorder subscribed to perception")
+        time.sleep(1.0)
         # At half speed: the node keeps only the newest image when one arrives while it is busy,
         # and under the whole suite's load an image can take longer than the camera period. This
         # test compares detections, not throughput (the perception benchmark measures that).
         player = replay.start_logged("play", [DMG, "bag", "play", str(live_bag), "--topics", *INPUTS,
-                                              "--wait-subscribers", "30", "--rate", "0.5"])
+                                              "--wait-subscribers", "30", "--delay", "3", "--rate", "0.5"])
         assert player.wait(timeout=120) == 0, replay.output(player)
         time.sleep(2.0)
         stop(recorder)
