@@ -394,8 +394,8 @@ def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, ori
 
 def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius: float,
                      spread: float = 0.0) -> np.ndarray:
-    """Points (n, 3; from the closed pusher's grasp frame turned `orientation`) on both fingertips'
-    spheres facing the push `direction`: the front and rims TIP_RIMS off it, TIP_RIM_TURNS round.
+    """Points (n, 3; from the pusher's grasp frame turned `orientation`, its tips `spread` apart or closed) on
+    both fingertips' spheres facing the push `direction`: the front and rims TIP_RIMS off it, TIP_RIM_TURNS round.
     The first of them to meet the object along the push is where a tip meets it."""
     side = np.cross(direction, orientation[:, 0] if abs(float(direction @ orientation[:, 0])) < 0.9 else orientation[:, 1])
     side /= np.linalg.norm(side)
