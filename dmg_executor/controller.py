@@ -1284,8 +1284,10 @@ class PlanExecutor:
         to_holder = invert(holder)
         point_h = apply(to_holder, point)
         direction_h = to_holder[:3, :3] @ direction
-        outside_h = point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
-        if outside_h[2] < box.low[2] and not push.spread:
+        # Where the last stretch begins: a push comes in along its line; a straddle push along the pusher's
+        # fingers, known once its orientation is (below).
+        outside_h = None if push.spread else point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
+        if outside_h is not None and outside_h[2] < box.low[2]:
             # The line leaves the kept-free space through its palm end: the pusher would come up along
             # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along "
