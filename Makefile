@@ -7,7 +7,7 @@ export MUJOCO_GL ?= egl
 .PHONY: setup demo test bench eval clean
 
 setup:
-	@bash scripts/setup.sh
+	@DMG_VENV=$(abspath $(VENV)) bash scripts/setup.sh
 
 demo: setup
 	$(DMG) demo

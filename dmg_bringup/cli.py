@@ -9,8 +9,8 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import (bag, demo, evaluation, graph_cli, launcher, monitor, perception_bench, planner_bench, ros_verbs,
-                          sim_bench)
+from dmg_bringup import (bag, demo, docs, evaluation, graph_cli, launcher, monitor, perception_bench, planner_bench,
+                          ros_verbs, sim_bench)
 from dmg_bringup.environment import ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
 
@@ -44,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.register(subparsers)
     monitor.register(subparsers)
     evaluation.register(subparsers)
+    docs.register(subparsers)
     bench = subparsers.add_parser("bench", help="benchmarks of the ROS nodes (the DMG core: `dmg graph bench`)")
     verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
     planner_bench.register(verbs)

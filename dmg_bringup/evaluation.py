@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 import zlib
@@ -244,6 +245,7 @@ def plot(summary: dict, runs: list[RunOutcome], output: Path) -> Path:
 
 
 def run_eval(args: argparse.Namespace) -> int:
+    os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must precede the first mujoco import
     from dmg_bringup.closed_loop import ClosedLoop
     from dmg_bringup.environment import parameter_defaults
     from dmg_executor.push_points import ObjectSurface

@@ -6,7 +6,7 @@ rgb8 message payload to grey, detects the tags and fuses the object pose in the 
 frame, round after round. Node: perception_node as its own process pinned to one CPU; this
 process offers it the frames as fast as `--offer-rate` (with camera_info and the camera and
 gripper poses stamped like each image, wall clock) and measures what comes back: object
-poses per second, and latency from the image stamp to the pose's arrival. Goal (issue 7):
+poses per second, and latency from the image stamp to the pose's arrival. Goal:
 >= 60 fps (the paper tracks at 28 fps).
 """
 from __future__ import annotations

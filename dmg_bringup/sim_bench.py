@@ -6,7 +6,7 @@ and once rendering the wrist camera at its rate; the time per rendered frame is 
 Node: sim_bridge_node as its own process, unthrottled (real_time_factor 0), once with
 camera_rate 0 and once at 30 Hz; the real-time factor is simulated time (/clock) over wall
 time seen by a subscriber, which also counts the images that arrive.
-Goals (issue 6): >= 1.0 without the camera, >= 0.5 with it.
+Goals: >= 1.0 without the camera, >= 0.5 with it.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The object's pose from the AprilTags a camera sees, fused over all visible tags.
 
-Per tag, cv2.aruco finds the corners (AprilTag corner refinement) and solvePnP's
+Per tag, cv2.aruco finds the corners (sub-pixel corner refinement) and solvePnP's
 IPPE_SQUARE gives its two candidate poses; every candidate proposes an object pose through
 the object's tag layout. The proposal that explains the most tags (each tag's corners
 within `inlier_threshold` pixels) wins - of proposals that explain them about as well (a

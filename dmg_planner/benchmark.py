@@ -1,6 +1,6 @@
 """`dmg graph bench`: time every stage of the DMG core and how it scales with supervoxel count.
 
-Goals (issue 4, 2-core machine, ~10 cm object): build < 0.2 s at 13 mm seeds and < 2 s at
+Goals (2-core machine, ~10 cm object): build < 0.2 s at 13 mm seeds and < 2 s at
 5 mm; a plan query < 5 ms median; a ~1300 x 1300 manipulability matrix < 2 s.
 """
 from __future__ import annotations

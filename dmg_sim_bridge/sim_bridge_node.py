@@ -51,6 +51,7 @@ from dmg_bringup.parameters import declare_from_config  # noqa: E402
 from dmg_interfaces.msg import GripperCommand, GripperState  # noqa: E402
 from dmg_interfaces.srv import ResetScene  # noqa: E402
 from dmg_sim_bridge.cell import Cell, CellError, ResetResult  # noqa: E402
+from dmg_sim_bridge.sim_config import SimConfigError  # noqa: E402
 from dmg_sim_bridge.recording import FrameRecorder  # noqa: E402
 from dmg_sim_bridge.sim_config import ARM_ROLES  # noqa: E402
 
@@ -91,7 +92,7 @@ class ResetRequest:
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("sim_bridge_node", __doc__, "example: sim_bridge_node --ros-args -p object:=plug -p camera_rate:=15.0",
-                    argv, SimBridgeNode, startup_errors=(CellError,))
+                    argv, SimBridgeNode, startup_errors=(CellError, SimConfigError))
 
 
 class SimBridgeNode(Node):

@@ -75,6 +75,10 @@ class SimConfig:
         return self.document["table"]
 
 
+class SimConfigError(ValueError):
+    """config/sim.yaml (or a user's copy) cannot describe a cell: the message says which key and why."""
+
+
 def _pose(entry: dict) -> np.ndarray:
     return from_rotation(Rotation.from_euler("xyz", entry["rpy_deg"], degrees=True).as_matrix(), entry["xyz"])
 
@@ -84,12 +88,12 @@ def _section(document: dict, name: str, spec: type, path: Path) -> dict:
     key without a default (an older copy) or misspells one is told which, not met with a TypeError."""
     entry = document.get(name)
     if not isinstance(entry, dict):
-        raise ValueError(f"{path}: section '{name}' is missing or not a mapping")
+        raise SimConfigError(f"{path}: section '{name}' is missing or not a mapping")
     known = {f.name for f in fields(spec)}
     required = {f.name for f in fields(spec) if f.default is MISSING and f.default_factory is MISSING}
     missing, unknown = sorted(required - entry.keys()), sorted(entry.keys() - known)
     if missing or unknown:
-        raise ValueError(f"{path}: section '{name}': " + "; ".join(
+        raise SimConfigError(f"{path}: section '{name}': " + "; ".join(
             f"{label} {', '.join(keys)}" for label, keys in (("missing", missing), ("unknown", unknown)) if keys)
             + " (config/sim.yaml in the repository has them all)")
     return dict(entry)
@@ -97,13 +101,16 @@ def _section(document: dict, name: str, spec: type, path: Path) -> dict:
 
 def load_sim_config(path: Path | None = None) -> SimConfig:
     path = Path(path or config_dir() / "sim.yaml")
-    document = yaml.safe_load(path.read_text())
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise SimConfigError(f"{path}: cannot be read: {error}") from None
     if not isinstance(document, dict):
-        raise ValueError(f"{path}: not a YAML mapping")
+        raise SimConfigError(f"{path}: not a YAML mapping")
     try:
         return _sim_config(document, path)
     except KeyError as missing:
-        raise ValueError(f"{path}: key {missing} is missing (config/sim.yaml in the repository has them all)") from None
+        raise SimConfigError(f"{path}: key {missing} is missing (config/sim.yaml in the repository has them all)") from None
 
 
 def _sim_config(document: dict, path: Path) -> SimConfig:
@@ -112,10 +119,10 @@ def _sim_config(document: dict, path: Path) -> SimConfig:
         gripper["friction"] = tuple(gripper["friction"])
     arms = dict(document["arms"])
     if sorted(arms) != list(ARM_ROLES) or sorted(arms.values()) != ["left", "right"]:
-        raise ValueError(f"{path}: arms must map arm1 and arm2 to left and right, got {arms}")
+        raise SimConfigError(f"{path}: arms must map arm1 and arm2 to left and right, got {arms}")
     camera = CameraSpec(**_section(document, "camera", CameraSpec, path))
     if camera.arm not in ARM_ROLES:
-        raise ValueError(f"{path}: camera.arm must be one of {ARM_ROLES}, got {camera.arm!r}")
+        raise SimConfigError(f"{path}: camera.arm must be one of {ARM_ROLES}, got {camera.arm!r}")
     tolerance = document["settle_tolerance"]
     return SimConfig(
         document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**_section(document, "control", ControlSpec, path)),

@@ -208,9 +208,8 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
         else:
             cases["side by side"] += 1
     assert min(cases.values()) > 50, cases
-    # The box of stop 31 (eval pair 2): the face slanted 41 deg, tips side by side across the push
-    # along the slant. Set back from the push line by the tip's reach and the gap, one tip started
-    # 2.8 mm inside the face; now both are out of it.
+    # A box face slanted 41 deg, tips side by side across the push along the slant: set back from the
+    # push line by the tip's reach and the gap alone, one tip would start 2.8 mm inside the face; both are out of it.
     direction, across = np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0])
     normal = Rotation.from_rotvec(np.deg2rad(41.0) * np.array([1.0, 0.0, 0.0])).as_matrix() @ -direction
     orientation = np.column_stack([across, -direction, np.cross(across, -direction)])
@@ -1283,7 +1282,7 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     goal's angle tolerance. With `level_tilt_deg: 0` the run ends there, OUT_OF_TOLERANCE; by default a
     press along the grasp axis beside the grasp turns it back to within 1 deg, the grip at the hold force
     while pressing, and the run ends OK with the axis still within `level_tilt_deg` (sim: 3.9 -> 0.3 deg in
-    1.5 s at ~1 N; since stop 43's faster approaches and turns, 3.9 -> 0.9, 1.05 at the end)."""
+    1.5 s at ~1 N)."""
     from dmg_executor.controller import Outcome
     from dmg_planner.transforms import distance, invert
 
@@ -2076,7 +2075,7 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
 
 def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by_the_pusher(loop_parts):
     """A grasp of the plug with one fingertip seated on a prong (planned with the paper's finger box
-    from the contact, finger_tip_overhang 0; stop 26's eval start): pushed 10 mm along the fingers
+    from the contact, finger_tip_overhang 0): pushed 10 mm along the fingers
     without steering, the sliding plug turns off its grasp axis (nothing resists while it slides);
     with the pusher sliding along the grasp axis against the tilt it sees, it stays near the axis."""
     from scipy.spatial.transform import Rotation
@@ -2124,7 +2123,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
 
 
 def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(loop_parts):
-    """The plug held 45 deg about its grasp axis from square (stop 27's eval pair 0): the pushes across
+    """The plug held 45 deg about its grasp axis from square: the pushes across
     and along the fingers meet its faces at 45 deg within edge_margin of their edges; the one square
     onto a face turns it."""
     from scipy.spatial.transform import Rotation

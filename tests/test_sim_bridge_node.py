@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+import os
+import shutil
 import subprocess
 import time
 
@@ -10,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes, RosTestNode
+from conftest import DMG, REPO, Processes, RosTestNode
 from dmg_perception.tags import detector
 
 pytestmark = pytest.mark.ros
@@ -226,5 +228,17 @@ def test_an_unknown_start_object_exits_with_the_reason():
 def test_a_refused_parameter_exits_with_the_reason(argument, words):
     result = subprocess.run([DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args", "-p", argument],
                             capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and "cannot start" in result.stderr and words in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("breakage, words", [("gripper: [not, a, mapping]\n", "section 'gripper'"),
+                                             ("physics: {timestep: 0.002\n", "cannot be read")])
+def test_a_broken_sim_yaml_exits_with_the_reason(tmp_path, breakage, words):
+    config = tmp_path / "config"
+    shutil.copytree(REPO / "config", config)
+    (config / "sim.yaml").write_text(breakage)
+    result = subprocess.run([DMG, "run", "dmg_sim_bridge", "sim_bridge_node"], capture_output=True, text=True,
+                            timeout=60, env={**os.environ, "DMG_CONFIG_DIR": str(config)})
     assert result.returncode == 1 and "cannot start" in result.stderr and words in result.stderr, result.stderr
     assert "Traceback" not in result.stderr
