@@ -19,12 +19,12 @@ import yaml
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from dmg_bringup.environment import REPO_ROOT
 from dmg_bringup.messages import InterfaceError, resolve_type
 from dmg_bringup.ros_verbs import DISCOVERY_WAIT, cli_node, error, spin_for, subscriber_qos
+from dmg_common.config import REPO_ROOT
 
 SCHEMA_DIRS = (REPO_ROOT / "msg_schemas" / "msg",)
 DRAIN_LIMIT = 3.0   # s a stopped recorder goes on writing what its subscriptions still hold

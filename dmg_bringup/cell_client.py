@@ -10,8 +10,8 @@ import rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from dmg_bringup.geometry_messages import pose_message, transform_from_pose
-from dmg_planner.transforms import invert
+from dmg_common.ros.geometry_messages import pose_message, transform_from_pose
+from dmg_common.transforms import invert
 
 
 class CellError(RuntimeError):
@@ -21,12 +21,11 @@ class CellError(RuntimeError):
 class CellClient:
     def __init__(self, node: Node, guard: Callable[[], str | None] = lambda: None) -> None:
         """`guard` is asked while waiting: a text (e.g. "planner exited with 1") ends the wait."""
-        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-        from rclpy.action import ActionClient
-
         from dmg_interfaces.action import ExecuteRepositioning
         from dmg_interfaces.msg import ExecutorState
         from dmg_interfaces.srv import PlanRepositioning, ResetScene
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+        from rclpy.action import ActionClient
 
         self.node = node
         self.guard = guard

@@ -9,10 +9,21 @@ import argparse
 import os
 import sys
 
-from dmg_bringup import (bag, demo, docs, evaluation, graph_cli, launcher, monitor, perception_bench, planner_bench,
-                          ros_verbs, sim_bench)
-from dmg_bringup.environment import ros_environment
+from dmg_bringup import (
+    bag,
+    demo,
+    docs,
+    evaluation,
+    graph_cli,
+    launcher,
+    monitor,
+    perception_bench,
+    planner_bench,
+    ros_verbs,
+    sim_bench,
+)
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
+from dmg_common.environment import ros_environment
 
 
 def run(args: argparse.Namespace) -> int:

@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from dmg_executor.controller import Command, Observation, PlanExecutor, Result
+from dmg_common.transforms import invert
+from dmg_executor.contract import Command, Observation, Result
+from dmg_executor.controller import PlanExecutor
 from dmg_executor.views import CameraModel
 from dmg_perception.estimator import ObjectPoseEstimator
-from dmg_planner.transforms import invert
 from dmg_sim_bridge.cell import Cell
 
 

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dmg_bringup.environment import apply_ros_environment, config_dir, load_settings
+from dmg_common.config import config_dir, load_settings
+from dmg_common.environment import apply_ros_environment
 from dmg_planner.objects import object_names
 
 
@@ -109,10 +110,10 @@ def _operate(settings: DemoSettings, launcher) -> dict:
     """Reset, plan, execute, judge: what an operator does, over ROS."""
     from dmg_bringup.bag import RECORDER_NODE
     from dmg_bringup.cell_client import CellClient, CellError
-    from dmg_bringup.geometry_messages import transform_from_pose
     from dmg_bringup.monitor import ProgressLines, StateSample
     from dmg_bringup.ros_verbs import cli_node
-    from dmg_planner.transforms import distance
+    from dmg_common.ros.geometry_messages import transform_from_pose
+    from dmg_common.transforms import distance
 
     def dead() -> str | None:
         gone = launcher.dead_required()
@@ -179,8 +180,8 @@ def _operate(settings: DemoSettings, launcher) -> dict:
 
 def _pictures(settings: DemoSettings, bag: Path, summary: dict, output: Path) -> dict:
     """DMG with planned and executed paths, errors over time, manipulability, camera frames."""
-    from dmg_bringup.environment import parameter_defaults
     from dmg_bringup.report import camera_frames, frame_sheet, plot_errors, read_run
+    from dmg_common.config import parameter_defaults
     from dmg_planner.library import ObjectLibrary, options_from_parameters
     from dmg_planner.manipulability import manipulability_matrix, save_matrix
     from dmg_planner.pictures import ContactPath, draw_graph

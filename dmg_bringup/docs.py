@@ -14,7 +14,7 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-from dmg_bringup.environment import REPO_ROOT, load_parameter_spec
+from dmg_common.config import REPO_ROOT, load_parameter_spec
 
 BEGIN = "<!-- parameters: begin (generated from config/{config}.yaml by `dmg docs`; do not edit) -->"
 END = "<!-- parameters: end -->"

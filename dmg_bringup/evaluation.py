@@ -25,7 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import binomtest
 
-from dmg_bringup.environment import load_settings
+from dmg_common.config import load_settings
 from dmg_planner.objects import object_names
 
 
@@ -121,10 +121,11 @@ def make_pairs(graph, matrix, handed_over: np.ndarray, settings: EvalSettings, r
 def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settings: EvalSettings, index: int,
              options):
     """One repositioning in the closed loop, judged by ground truth."""
-    from dmg_executor.controller import Outcome, PlanExecutor
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
+    from dmg_executor.controller import PlanExecutor
     from dmg_executor.settings import ExecutorSettings
     from dmg_planner.search import plan
-    from dmg_planner.transforms import distance, invert
 
     began = time.perf_counter()
     cell = loop.cell
@@ -247,14 +248,14 @@ def plot(summary: dict, runs: list[RunOutcome], output: Path) -> Path:
 def run_eval(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must precede the first mujoco import
     from dmg_bringup.closed_loop import ClosedLoop
-    from dmg_bringup.environment import parameter_defaults
+    from dmg_common.config import parameter_defaults
+    from dmg_common.transforms import invert
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.views import TagLayout
     from dmg_perception.estimator import ObjectPoseEstimator
     from dmg_planner.library import ObjectLibrary, options_from_parameters
     from dmg_planner.manipulability import manipulability_matrix
     from dmg_planner.objects import ObjectError, load_object
-    from dmg_planner.transforms import invert
     from dmg_sim_bridge.cell import Cell
 
     settings = EvalSettings.load(vars(args))

@@ -33,8 +33,9 @@ from typing import TextIO
 
 import yaml
 
-from dmg_bringup.environment import apply_ros_environment, config_dir, ros_environment
 from dmg_bringup.layout import ExecutableNotFound, resolve_executable
+from dmg_common.config import config_dir
+from dmg_common.environment import apply_ros_environment, ros_environment
 
 PR_SET_PDEATHSIG = 1
 COLOURS = ["\033[36m", "\033[33m", "\033[35m", "\033[32m", "\033[34m", "\033[31m"]

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
-from dmg_bringup.environment import REPO_ROOT
+from dmg_common.config import REPO_ROOT
 
 ENTRY_POINT_GROUP = "dmg.nodes"
 

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from dmg_bringup.bench_common import add_bench, stop_process
-from dmg_bringup.environment import apply_ros_environment, ros_environment
+from dmg_common.environment import apply_ros_environment, ros_environment
 
 GOAL_FPS = 60.0
 
@@ -30,8 +30,8 @@ def render_frames(turns_deg=(-20.0, 0.0, 20.0)) -> list[dict]:
     os.environ.setdefault("MUJOCO_GL", "egl")
     from scipy.spatial.transform import Rotation
 
+    from dmg_common.transforms import from_rotation
     from dmg_planner.objects import load_object, object_names
-    from dmg_planner.transforms import from_rotation
     from dmg_sim_bridge.cell import Cell, default_grasp
 
     cell = Cell()
@@ -50,10 +50,10 @@ def render_frames(turns_deg=(-20.0, 0.0, 20.0)) -> list[dict]:
 
 def core_fps(frames: list[dict], seconds: float) -> dict:
     """Pipeline rate in this process, pinned to one CPU."""
+    from dmg_common.transforms import invert
     from dmg_perception.estimator import ObjectPoseEstimator
     from dmg_perception.images import grey_image
     from dmg_planner.objects import load_object, object_names
-    from dmg_planner.transforms import invert
 
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
     estimator = ObjectPoseEstimator([load_object(name) for name in object_names()])
@@ -81,7 +81,8 @@ def node_fps(frames: list[dict], seconds: float, offer_rate: float) -> dict:
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
-    from dmg_bringup.geometry_messages import pose_message, seconds as stamp_seconds, time_message
+    from dmg_common.ros.geometry_messages import pose_message, time_message
+    from dmg_common.ros.geometry_messages import seconds as stamp_seconds
 
     cpu = sorted(os.sched_getaffinity(0))[-1]
     command = [sys.executable, "-m", "dmg_bringup.cli", "run", "dmg_perception", "perception_node"]

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from dmg_bringup.bench_common import add_bench, stop_process
-from dmg_bringup.environment import apply_ros_environment, ros_environment
+from dmg_common.environment import apply_ros_environment, ros_environment
 
 ECHO_SERVICE = "/echo_plan_repositioning"
 
@@ -27,10 +27,9 @@ def echo_server() -> int:
     """Serve PlanRepositioning on ECHO_SERVICE with an empty OK response, until SIGINT/SIGTERM."""
     apply_ros_environment()
     import rclpy
+    from dmg_interfaces.srv import PlanRepositioning
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile
-
-    from dmg_interfaces.srv import PlanRepositioning
 
     rclpy.init()
     node = rclpy.create_node("echo_plan_repositioning")
@@ -58,10 +57,10 @@ def _percentiles(values: list[float]) -> dict[str, float]:
 def run(calls: int, seed_resolution: float) -> dict:
     apply_ros_environment()
     import rclpy
+    from dmg_interfaces.srv import PlanRepositioning
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
 
-    from dmg_interfaces.srv import PlanRepositioning
     from dmg_planner.graph import GraphParameters, build_graph
     from dmg_planner.objects import load_object
     from dmg_planner.search import grasp_pose

@@ -18,13 +18,11 @@ from contextlib import contextmanager
 import rclpy
 from rclpy.action import ActionClient
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_services_default
 from rclpy.signals import SignalHandlerOptions
-from rclpy.qos import (DurabilityPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_services_default)
 
-from dmg_bringup.environment import apply_ros_environment
-from dmg_bringup.messages import (InterfaceError, flatten, parse_values, resolve_type, to_plain,
-                                  to_yaml, fill)
+from dmg_bringup.messages import InterfaceError, fill, flatten, parse_values, resolve_type, to_plain, to_yaml
+from dmg_common.environment import apply_ros_environment
 
 DISCOVERY_WAIT = 1.0  # s: how long a fresh participant needs to hear about the graph here
 LIST_WAIT = 2.0  # s: listing must not miss endpoints, so it waits longer than a matching publisher

@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from dmg_bringup.bench_common import add_bench, stop_process
-from dmg_bringup.environment import apply_ros_environment, ros_environment
+from dmg_common.environment import apply_ros_environment, ros_environment
 
 GOALS = {"without_camera": 1.0, "with_camera": 0.5}
 

@@ -28,21 +28,29 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field, replace
-from enum import IntEnum
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from dmg_common.transforms import apply, distance, from_rotation, invert, turn_between
+from dmg_executor.contract import Command, GripCommand, Observation, Outcome, Progress, Result, Step
 from dmg_executor.ects import arm_twists
+from dmg_executor.fingertips import fingertip_shells, leading_tip, meeting_start, push_start, sweep_to_touch
 from dmg_executor.grip import tilt_hold_force
-from dmg_executor.push_points import (SLANT_LIMIT_DEG, ObjectSurface, PushError, PushPoint, exit_normals, rotation_push,
-                                      straddle_push, translation_push)
+from dmg_executor.push_points import (
+    ObjectSurface,
+    PushError,
+    PushPoint,
+    exit_normals,
+    rotation_push,
+    straddle_push,
+    translation_push,
+)
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.routes import KeepOut, RouteError, keep_out, route
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, overlap, placed, ranked_views, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
-from dmg_planner.transforms import apply, distance, from_rotation, invert, turn_between
 
 MAX_PUSHES_PER_PRIMITIVE = 4
 MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
@@ -56,7 +64,6 @@ LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers
 # middle to either fingertip (object narrow at the middle, wide near a finger: a T held across its stem's
 # foot and its bar's top - sim probe: the stem's levers all failed, the rotation left 8 deg off).
 OFF_MIDDLE_SHARES = np.array([0.5, -0.5, 0.75, -0.75])
-LEADING_TIP = 0.5      # tips one behind the other: the one ahead along the push by at least this share of their spacing
 OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
 DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
 TURN_GAIN = np.deg2rad(1.0)   # the object turning this much with the pusher is progress (pose noise: up to 0.5 deg)
@@ -88,8 +95,6 @@ MISSED_TURN = np.deg2rad(10.0)
 # A rotation's pusher sweeps round the grasp axis, its tips not along the push line: from touching the face's
 # push point, they must meet it again within this turn (more: the sweep runs along the face or past its edge).
 SWEEP_LIMIT = np.deg2rad(5.0)
-SWEEP_STEP = np.deg2rad(0.5)
-SWEEP_REACH = 0.0005    # m: a tip this near the face meets it (the sweep is judged from SWEEP_BACK short of touching)
 SWEEP_BACK = 0.001
 MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
 TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
@@ -101,14 +106,6 @@ LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands)
 # A view the arm stopped this far short of (its wrist at a limit): at that place, views further from
 # where it got to are not tried (sim, bracket: five views 71-89 deg beyond reach, 4 s each, none seen).
 VIEW_SHORT = np.deg2rad(20.0)
-TIP_RIMS = np.deg2rad([0.0, 30.0, 60.0, 80.0])   # fingertip sphere points off the push direction ...
-TIP_RIM_TURNS = np.deg2rad(np.arange(0.0, 360.0, 45.0))   # ... and round it, that may meet the object first
-# Where a push starts the fingertips keep this clear of the object all round (less than `gap`: ahead they are that far
-# from it). A tip grazing a face along the push line there (sim, plug: 7 N on a prong's side as the grip loosened
-# for a level press) shoves the object before the push and may leave the face out of the push's reach.
-TIP_CLEARANCE = 0.002
-_AROUND = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
-SHELL_DIRECTIONS = _AROUND / np.linalg.norm(_AROUND, axis=1, keepdims=True)   # 26 ways out of a fingertip's centre
 SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
 # After the plan, a grasp outside the goal's angle tolerance with its axis tilted more than `level_tilt` off the
 # goal's is pressed back about an axis across it (the object rolling on gripper 1's fingertips, the grip held),
@@ -144,88 +141,6 @@ STRADDLE_TWIST = np.deg2rad(15.0)
 STRADDLE_FINGERS = np.cos(np.deg2rad(30.0))
 VIEW_POSES = 4        # a look for a certain pose averages the poses from at most this many of its last views
 FRUITLESS_NEAR = 0.02   # m: a place this close to one a look saw nothing from counts as that one (vantage places are 5 cm or more apart)
-
-
-class Step(IntEnum):
-    """Same values as the feedback steps of dmg_interfaces/action/ExecuteRepositioning."""
-
-    FIND_CONTACT = 0
-    APPROACH = 1
-    EXECUTE = 2
-    LEAVE = 3
-
-
-class Outcome(IntEnum):
-    """Same values as the result codes of dmg_interfaces/action/ExecuteRepositioning."""
-
-    OK = 0
-    BAD_REQUEST = 1
-    PLANNING_FAILED = 2
-    OBJECT_LOST = 3
-    SLIP = 4
-    STEP_TIMEOUT = 5
-    CANCELED = 6
-    LIMIT_VIOLATION = 7
-    OUT_OF_TOLERANCE = 8
-    ROBOT_LOST = 9
-
-
-@dataclass
-class Observation:
-    """What the executor knows at one control tick (base frame unless said otherwise)."""
-
-    time: float                              # s, the controller's clock
-    holder: np.ndarray                       # 4x4 holding gripper's grasp frame
-    pusher: np.ndarray                       # 4x4 pushing gripper's grasp frame
-    object_in_holder: np.ndarray | None      # 4x4 latest perceived object pose in the holder's frame
-    object_time: float                       # s, when that pose was seen (-inf: never)
-    opening: float                           # m between the holder's fingertips
-    object_covariance: np.ndarray | None = None   # 6x6 of that pose (holder frame; None: taken as certain)
-
-    @property
-    def object_tilt_sigma(self) -> float:
-        """rad, the object pose's standard deviation of turn off the grasp axis."""
-        return 0.0 if self.object_covariance is None else tilt_sigma(self.object_covariance)
-
-    @property
-    def object_position_sigma(self) -> float:
-        """m, the object pose's standard deviation of position along its least certain direction."""
-        return 0.0 if self.object_covariance is None else position_sigma(self.object_covariance)
-
-
-@dataclass
-class GripCommand:
-    opening: float      # m
-    max_force: float    # N per finger
-
-
-@dataclass
-class Command:
-    holder: np.ndarray = field(default_factory=lambda: np.zeros(6))   # twist (linear, angular) of the holder's grasp frame
-    pusher: np.ndarray = field(default_factory=lambda: np.zeros(6))
-    holder_grip: GripCommand | None = None
-    pusher_grip: GripCommand | None = None
-
-
-@dataclass
-class Progress:
-    primitive_index: int
-    primitive_count: int
-    step: Step
-    contact_error: float     # m, remaining principal contact displacement of the current primitive
-    angle_error: float       # rad, remaining angle about the grasp axis
-    pushes: int              # pushes done on the current primitive
-    contact: np.ndarray      # m, perceived principal contact in the object frame (NaN before a pose)
-
-
-@dataclass
-class Result:
-    outcome: Outcome
-    message: str
-    primitives_completed: int
-    position_error: float    # m, principal contact vs the goal contact (nan if never seen)
-    angle_error: float       # rad, gripper orientation vs the goal's
-    duration: float          # s
 
 
 @dataclass
@@ -282,25 +197,6 @@ class _Look:
     poses: list[tuple[np.ndarray, float]] = field(default_factory=list)   # (pose, m sigma) last seen from each view
 
 
-def _largest_sigma(covariance: np.ndarray, axes: slice) -> float:
-    """The larger standard deviation of a pose over some of its 6x6 covariance's axes (x, y, z,
-    rotation about x, y, z), correlations included; inf if that block is not finite."""
-    block = np.asarray(covariance, float).reshape(6, 6)[axes, axes]
-    if not np.all(np.isfinite(block)):
-        return math.inf
-    return float(np.sqrt(max(float(np.linalg.eigvalsh(block)[-1]), 0.0)))
-
-
-def tilt_sigma(covariance: np.ndarray) -> float:
-    """rad: how uncertain a pose (holder frame) is in its turn off the grasp axis x (rotation about y, z)."""
-    return _largest_sigma(covariance, slice(4, 6))
-
-
-def position_sigma(covariance: np.ndarray) -> float:
-    """m: how uncertain a pose is in its position, along its least certain direction."""
-    return _largest_sigma(covariance, slice(0, 3))
-
-
 def _rotation_about_axis(rotation: np.ndarray) -> float:
     """Angle [rad] of a rotation (holder frame) about the grasp axis x."""
     return float(Rotation.from_matrix(rotation).as_rotvec()[0])
@@ -351,104 +247,6 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     While the object slides, nothing else resists a turn about that axis."""
     axis = np.cross(direction, [1.0, 0.0, 0.0])
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
-
-
-def _tip_ahead(facing: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
-    """The closed pusher's fingertip centre [m, from its grasp frame turned `orientation`] that is
-    clearly ahead along `facing` (tips one behind the other: LEADING_TIP); zero for tips side by
-    side, where which one touches first is down to the arm's tracking."""
-    ahead = float(facing @ orientation[:, 0])
-    if abs(ahead) < LEADING_TIP:
-        return np.zeros(3)
-    return math.copysign(tip_radius, ahead) * orientation[:, 0]
-
-
-def leading_tip(direction: np.ndarray, orientation: np.ndarray, tip_radius: float) -> np.ndarray:
-    """Where [m, across `direction`] the closed pusher's fingertip that meets a face square to the push
-    first sits from its grasp frame (turned `orientation`): the tip ahead along `direction`, or zero
-    (_tip_ahead). A contact off the push line turns the sliding object (sim, bracket: a tip 1.8 mm
-    off along the grasp axis, 2.3 deg of tilt over an 8 mm blind push; box: a tip 6.6 mm off across
-    it, 26 deg about the grasp axis over a 3 mm push)."""
-    tip = _tip_ahead(direction, orientation, tip_radius)
-    return tip - (tip @ direction) * direction
-
-
-def push_start(point: np.ndarray, normal: np.ndarray, direction: np.ndarray, orientation: np.ndarray,
-               tip_radius: float, gap: float, spread: float = 0.0) -> np.ndarray:
-    """Where the pusher's grasp frame (turned `orientation`) starts a push along `direction` on `point`
-    of a face with outward `normal`: the fingertip nearer the face, when clearly so (_tip_ahead), on
-    the line along `direction` on which it meets the face at `point`, and neither tip nearer than
-    `gap` along that line to the face's plane. Set back from the push line alone, tips side by side
-    on a face slanted to the push are not equally far from it (sim, box face slanted 41 deg: the
-    other tip started 3 mm inside it, pressed 21 N into it against the closed grip, and the box
-    jumped 2.3 mm / 2.1 deg the wrong way when the grip loosened). `spread`: the tips opened that far
-    apart (a straddle push: side by side across it, the point half way between them)."""
-    ahead = np.zeros(3) if spread else _tip_ahead(-normal, orientation, tip_radius)
-    met = point + tip_radius * normal - ahead   # that tip touching `point`
-    tips = met + _tip_centres(orientation, tip_radius, spread)
-    # How far each tip travels along `direction` before it touches the face's plane.
-    slant = max(-float(direction @ normal), np.cos(np.deg2rad(SLANT_LIMIT_DEG)))
-    travel = ((tips - point) @ normal - tip_radius) / slant
-    return met - (gap - min(float(travel.min()), 0.0)) * direction
-
-
-def fingertip_fronts(direction: np.ndarray, orientation: np.ndarray, tip_radius: float,
-                     spread: float = 0.0) -> np.ndarray:
-    """Points (n, 3; from the pusher's grasp frame turned `orientation`, its tips `spread` apart or closed) on
-    both fingertips' spheres facing the push `direction`: the front and rims TIP_RIMS off it, TIP_RIM_TURNS round.
-    The first of them to meet the object along the push is where a tip meets it."""
-    side = np.cross(direction, orientation[:, 0] if abs(float(direction @ orientation[:, 0])) < 0.9 else orientation[:, 1])
-    side /= np.linalg.norm(side)
-    other = np.cross(direction, side)
-    tilt, turn = np.meshgrid(TIP_RIMS, TIP_RIM_TURNS)
-    facing = (np.cos(tilt).reshape(-1, 1) * direction
-              + np.sin(tilt).reshape(-1, 1) * (np.cos(turn).reshape(-1, 1) * side + np.sin(turn).reshape(-1, 1) * other))
-    return (_tip_centres(orientation, tip_radius, spread)[:, None, :] + tip_radius * facing[None]).reshape(-1, 3)
-
-
-def fingertip_shells(orientation: np.ndarray, tip_radius: float, spread: float = 0.0) -> np.ndarray:
-    """Points (n, 3; from the pusher's grasp frame turned `orientation`, its tips `spread` apart or closed)
-    TIP_CLEARANCE out from both fingertips' spheres, all round them: where a push starts, none may be
-    inside the object."""
-    out = (tip_radius + TIP_CLEARANCE) * SHELL_DIRECTIONS
-    return (_tip_centres(orientation, tip_radius, spread)[:, None, :] + out[None]).reshape(-1, 3)
-
-
-def sweep_to_touch(surface: ObjectSurface, object_pose: np.ndarray, pusher: np.ndarray, holder: np.ndarray,
-                   direction: np.ndarray, tip_radius: float, limit: float) -> float:
-    """How far [rad] the closed pusher (pose `pusher`, base frame) turns about the grasp axis (x of `holder`)
-    the way that moves it along the push `direction` before a fingertip comes within SWEEP_REACH of the
-    object at `object_pose`; inf if not within `limit`. A rotation's pusher sweeps: where its tips lie
-    beside the grasp axis rather than across the push line from it, the sweep runs along the face more
-    than into it."""
-    axis, origin = holder[:3, 0], holder[:3, 3]
-    tips = pusher[:3, 3] + _tip_centres(pusher[:3, :3], tip_radius)
-    sense = 1.0 if float(np.cross(axis, tips.mean(axis=0) - origin) @ direction) >= 0.0 else -1.0
-    angles = np.arange(0.0, limit + SWEEP_STEP / 2, SWEEP_STEP)
-    turns = Rotation.from_rotvec(sense * angles[:, None] * axis).as_matrix()          # (k, 3, 3)
-    swept = np.einsum("kij,nj->kni", turns, tips - origin) + origin                    # (k, 2, 3)
-    near = surface.distance(apply(invert(object_pose), swept.reshape(-1, 3))).reshape(len(angles), -1).min(axis=1)
-    touching = np.flatnonzero(near <= tip_radius + SWEEP_REACH)
-    return float(angles[touching[0]]) if len(touching) else float("inf")
-
-
-def _tip_centres(orientation: np.ndarray, tip_radius: float, spread: float = 0.0) -> np.ndarray:
-    """The pusher's two fingertip centres (2, 3; from its grasp frame turned `orientation`): side by side
-    along its x, `spread` apart, or touching (closed)."""
-    return max(tip_radius, spread / 2) * np.outer([1.0, -1.0], orientation[:, 0])
-
-
-def meeting_start(start: np.ndarray, orientation: np.ndarray, direction: np.ndarray, object_pose: np.ndarray,
-                  surface: ObjectSurface, tip_radius: float, gap: float, spread: float = 0.0) -> np.ndarray:
-    """`start` (base frame) moved along the push `direction` until the fingertip that meets the
-    object (at `object_pose`) first - rays from the tips' fronts onto its mesh - is `gap` from it.
-    `push_start` sets back by the face's plane: a tip whose line passes beside the face never meets
-    it (sim, plug: the push line 4-6 mm above a face's edge, tips side by side across it - the other
-    tip started 12-14 mm away, and blind pushes counted from `gap` ended 6-8 mm short, three in a row)."""
-    inverse = invert(object_pose)
-    meet = surface.travel(apply(inverse, start + fingertip_fronts(direction, orientation, tip_radius, spread)),
-                          inverse[:3, :3] @ direction)
-    return start if not np.isfinite(meet) else start + (meet - gap) * direction
 
 
 def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:

@@ -14,7 +14,7 @@ Parameters: config/executor.yaml (topic prefixes, gains, speeds, limits, toleran
 The control loop runs on a timer of the node's clock (simulated time with use_sim_time). One
 goal at a time; a second is rejected. Every way a run ends - done, cancelled, a fault - stops
 both arms and leaves the object gripped at the hold force. One thread runs every callback (see
-dmg_bringup.waiting): a goal awaits its run's end while the control tick, the watchdog and the
+dmg_common.ros.waiting): a goal awaits its run's end while the control tick, the watchdog and the
 subscriptions go on.
 """
 from __future__ import annotations
@@ -24,6 +24,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from dmg_interfaces.action import ExecuteRepositioning
+from dmg_interfaces.msg import ExecutorState, GripperCommand, GripperState
+from dmg_interfaces.srv import PlanRepositioning
 from geometry_msgs.msg import Point, PoseStamped, PoseWithCovarianceStamped, TwistStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.clock import Clock, ClockType
@@ -32,21 +35,18 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo
 
-from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_pose
-from dmg_bringup.node_main import run_node
-from dmg_bringup.parameters import declare_from_config
-from dmg_bringup.waiting import wait_until
-from dmg_executor.controller import Command, Observation, Outcome, PlanExecutor, Result
+from dmg_common.ros.geometry_messages import pose_message, seconds, transform_from_pose
+from dmg_common.ros.node_main import run_node
+from dmg_common.ros.parameters import declare_from_config
+from dmg_common.ros.waiting import wait_until
+from dmg_common.transforms import invert
+from dmg_executor.contract import Command, Observation, Outcome, Result
+from dmg_executor.controller import PlanExecutor
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, TagLayout
-from dmg_interfaces.action import ExecuteRepositioning
-from dmg_interfaces.msg import ExecutorState, GripperCommand, GripperState
-from dmg_interfaces.srv import PlanRepositioning
 from dmg_planner.objects import load_object
 from dmg_planner.primitives import Primitive, PrimitiveKind
-from dmg_planner.transforms import invert
-
 
 WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
 STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state, the camera model and a fresh object pose

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dmg_planner.transforms import apply
+from dmg_common.transforms import apply
 
 
 @dataclass

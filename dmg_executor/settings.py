@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from dmg_bringup.environment import parameter_defaults
+from dmg_common.config import parameter_defaults
 
 
 @dataclass(frozen=True)

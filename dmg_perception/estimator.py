@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from dmg_common.transforms import distance, from_rotation, invert
 from dmg_perception.tags import detector, tag_corners, tag_pose
 from dmg_planner.objects import ObjectModel
-from dmg_planner.transforms import distance, from_rotation, invert
 
 AMBIGUOUS_PX = 1.0   # proposals whose per-tag reprojection errors differ by less than this explain the tags alike
 

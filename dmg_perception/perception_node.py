@@ -22,15 +22,15 @@ import time
 import cv2
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from dmg_interfaces.msg import PerceptionStatus, TagDetection, TagDetections
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
-from dmg_bringup.geometry_messages import pose_message, seconds, transform_from_pose
-from dmg_bringup.node_main import run_node
-from dmg_bringup.parameters import declare_from_config
-from dmg_interfaces.msg import PerceptionStatus, TagDetection, TagDetections
+from dmg_common.ros.geometry_messages import pose_message, seconds, transform_from_pose
+from dmg_common.ros.node_main import run_node
+from dmg_common.ros.parameters import declare_from_config
 from dmg_perception.estimator import EstimationError, ObjectPoseEstimator
 from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState

@@ -7,7 +7,7 @@ from collections import deque
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from dmg_planner.transforms import from_rotation
+from dmg_common.transforms import from_rotation
 
 
 class PoseBuffer:

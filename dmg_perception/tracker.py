@@ -13,9 +13,9 @@ from enum import IntEnum
 
 import numpy as np
 
+from dmg_common.transforms import invert
 from dmg_perception.estimator import ObjectEstimate, ObjectPoseEstimator, TagObservation
 from dmg_perception.pose_buffer import PoseBuffer
-from dmg_planner.transforms import invert
 
 
 class TrackingState(IntEnum):

@@ -8,20 +8,16 @@ node the faces its AprilTags sit on.
 from __future__ import annotations
 
 import argparse
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from dmg_common.config import config_dir
+
 COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
 TAG_IDS = 587                 # the 36h11 family: ids 0 .. 586
-
-
-def config_dir() -> Path:
-    """config/ of this checkout, or DMG_CONFIG_DIR (kept ROS-free on purpose)."""
-    return Path(os.environ.get("DMG_CONFIG_DIR", Path(__file__).resolve().parent.parent / "config"))
 
 
 @dataclass

@@ -11,7 +11,7 @@ Parameters: config/planner.yaml (declared with descriptions and ranges).
 The node only translates: dmg_planner.library holds the objects, builds graphs on a worker
 thread and plans. One thread serves the requests in turn (a plan takes milliseconds; a
 LoadObject that waits for its graph awaits it without holding up the others, see
-dmg_bringup.waiting) and every failure is answered with an error code, never raised.
+dmg_common.ros.waiting) and every failure is answered with an error code, never raised.
 """
 from __future__ import annotations
 
@@ -20,16 +20,16 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from dmg_interfaces.msg import RepositioningPlan
+from dmg_interfaces.srv import LoadObject, PlanRepositioning
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
-from dmg_bringup.node_main import run_node
-from dmg_bringup.parameters import declare_from_config
-from dmg_bringup.waiting import wait_until
-from dmg_interfaces.msg import RepositioningPlan
-from dmg_interfaces.srv import LoadObject, PlanRepositioning
+from dmg_common.ros.node_main import run_node
+from dmg_common.ros.parameters import declare_from_config
+from dmg_common.ros.waiting import wait_until
 from dmg_planner import ros_conversions as rc
 from dmg_planner.library import LoadStatus, ObjectLibrary, ObjectState, options_from_parameters
 from dmg_planner.search import PlanStatus

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from dmg_interfaces.msg import ManipulationPrimitive
 from geometry_msgs.msg import Point, Pose, Vector3
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from dmg_bringup.geometry_messages import pose_message
-from dmg_interfaces.msg import ManipulationPrimitive
+from dmg_common.ros.geometry_messages import pose_message
 from dmg_planner.graph import GraphParameters
 from dmg_planner.library import LoadedObject, ObjectState
 from dmg_planner.search import GripperPose, PlanResult, PlanStatus

@@ -21,8 +21,8 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from dmg_common.transforms import distance, from_rotation, invert
 from dmg_planner.objects import ObjectModel, load_object
-from dmg_planner.transforms import distance, from_rotation, invert
 from dmg_sim_bridge.robot_model import load_robot
 from dmg_sim_bridge.scene import OBJECT_BODY, camera_name, cell_mjcf
 from dmg_sim_bridge.sim_config import ARM_ROLES, SimConfig, load_sim_config

@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from dmg_planner.objects import config_dir
+from dmg_common.config import config_dir
 from dmg_sim_bridge.mjcf import vector
 
 LINK_RADIUS = 0.045   # capsule radius of the drawn links [m]

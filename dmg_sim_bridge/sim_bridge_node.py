@@ -38,6 +38,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must precede t
 
 import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from dmg_interfaces.msg import GripperCommand, GripperState  # noqa: E402
+from dmg_interfaces.srv import ResetScene  # noqa: E402
 from geometry_msgs.msg import PoseStamped, TwistStamped  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
@@ -45,15 +47,12 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image, JointState  # noqa: E402
 from std_msgs.msg import Bool  # noqa: E402
 
-from dmg_bringup.node_main import run_node  # noqa: E402
-from dmg_bringup.geometry_messages import pose_message, time_message, transform_from_pose  # noqa: E402
-from dmg_bringup.parameters import declare_from_config  # noqa: E402
-from dmg_interfaces.msg import GripperCommand, GripperState  # noqa: E402
-from dmg_interfaces.srv import ResetScene  # noqa: E402
+from dmg_common.ros.geometry_messages import pose_message, time_message, transform_from_pose  # noqa: E402
+from dmg_common.ros.node_main import run_node  # noqa: E402
+from dmg_common.ros.parameters import declare_from_config  # noqa: E402
 from dmg_sim_bridge.cell import Cell, CellError, ResetResult  # noqa: E402
-from dmg_sim_bridge.sim_config import SimConfigError  # noqa: E402
 from dmg_sim_bridge.recording import FrameRecorder  # noqa: E402
-from dmg_sim_bridge.sim_config import ARM_ROLES  # noqa: E402
+from dmg_sim_bridge.sim_config import ARM_ROLES, SimConfigError  # noqa: E402
 
 RESET_TIMEOUT = 60.0         # s of wall time a reset request waits for the simulation thread
 RESYNC_LAG = 0.5             # s; further behind real time than this, pacing restarts from now

@@ -8,8 +8,8 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from dmg_planner.objects import config_dir
-from dmg_planner.transforms import from_rotation
+from dmg_common.config import config_dir
+from dmg_common.transforms import from_rotation
 from dmg_sim_bridge.gripper import GripperSpec
 
 ARM_ROLES = ("arm1", "arm2")

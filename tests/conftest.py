@@ -19,7 +19,7 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 # MuJoCo picks its GL backend when first imported: headless EGL before any test imports it.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from dmg_bringup.environment import apply_ros_environment  # noqa: E402
+from dmg_common.environment import apply_ros_environment  # noqa: E402
 
 apply_ros_environment()
 

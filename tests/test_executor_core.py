@@ -117,7 +117,7 @@ def test_the_tilt_hold_force_balances_the_weights_turn_across_the_grasp_axis():
 
 
 def test_tilt_sigma_reads_the_turn_off_the_grasp_axis_from_a_pose_covariance():
-    from dmg_executor.controller import tilt_sigma
+    from dmg_executor.contract import tilt_sigma
 
     covariance = np.diag([1e-6, 1e-6, 1e-6, 0.5**2, 0.02**2, 0.01**2])   # about x (the grasp axis) does not count
     assert tilt_sigma(covariance) == pytest.approx(0.02)
@@ -128,7 +128,7 @@ def test_tilt_sigma_reads_the_turn_off_the_grasp_axis_from_a_pose_covariance():
 
 
 def test_position_sigma_reads_the_least_certain_direction_from_a_pose_covariance():
-    from dmg_executor.controller import position_sigma
+    from dmg_executor.contract import position_sigma
 
     covariance = np.diag([0.001**2, 0.004**2, 0.002**2, 0.5**2, 0.5**2, 0.5**2])   # rotations do not count
     assert position_sigma(covariance) == pytest.approx(0.004)
@@ -159,7 +159,7 @@ def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lev
 
 
 def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_line():
-    from dmg_executor.controller import LEADING_TIP, leading_tip
+    from dmg_executor.fingertips import LEADING_TIP, leading_tip
 
     radius, push = 0.008, np.array([0.0, 1.0, 0.0])
     ahead_count = 0
@@ -183,7 +183,7 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
     """Set back along the push line alone, tips side by side on a face slanted to the push are not
     equally far from it: one would start inside it. Each starts at least `gap` (along the push)
     from the face's plane, the nearer one exactly that; one clearly nearer meets it at the push point."""
-    from dmg_executor.controller import LEADING_TIP, push_start
+    from dmg_executor.fingertips import LEADING_TIP, push_start
 
     radius, gap, point = 0.008, 0.006, np.array([0.01, 0.02, 0.03])
     random = np.random.default_rng(5)
@@ -225,7 +225,7 @@ def test_a_push_starts_gap_from_where_a_fingertip_meets_the_object_not_from_the_
     plane, but that tip passes below the face - the first tip to meet the plug does so 4 mm later
     (sim: blind pushes counted from `gap` ended short). meeting_start moves the start until the first
     meeting is exactly `gap` away; on the face's middle it leaves the start where it was."""
-    from dmg_executor.controller import fingertip_fronts, meeting_start, push_start
+    from dmg_executor.fingertips import fingertip_fronts, meeting_start, push_start
     from dmg_executor.push_points import ObjectSurface
     from dmg_planner.objects import load_object
 
@@ -427,10 +427,10 @@ def _box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, 
     """An executor for the plan from the box's default grasp (freshly reset) to goal_from_start(start)."""
     from scipy.spatial.transform import Rotation
 
+    from dmg_common.transforms import invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.settings import ExecutorSettings
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import invert
 
     cell, loop, graph, tags = loop_parts
     start = invert(cell.reset("box").object_in_gripper)
@@ -474,8 +474,8 @@ def _tick(loop, executor, pusher_stuck: bool = False) -> None:
 
 
 def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, alpha=0.0)
@@ -500,7 +500,7 @@ def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts
 
 
 def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     # A workspace that holds both grippers where they are, but not the space under the object.
@@ -522,7 +522,7 @@ def _translation_under_way(loop_parts, box_surface):
 
 
 def test_an_object_slipping_in_the_closed_grip_aborts_with_slip_and_the_grip_closes(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_under_way(loop_parts, box_surface)
@@ -536,7 +536,7 @@ def test_an_object_knocked_out_of_the_grip_ends_the_run_saying_so(loop_parts, bo
     """A dropped object is told from one the camera lost: gripper 1's fingers close on nothing."""
     import mujoco
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_under_way(loop_parts, box_surface)
@@ -552,7 +552,7 @@ def test_an_object_knocked_out_of_the_grip_ends_the_run_saying_so(loop_parts, bo
 
 
 def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, step_timeout=0.5)   # the approach needs seconds
@@ -581,8 +581,8 @@ def _half_a_second_into_the_push(loop, executor):
 
 def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_and_goes_on_once_it_is_seen(
         loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, blind_pushes=False)
@@ -604,7 +604,7 @@ def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_a
 def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_parts, box_surface):
     """The camera loses the object as the pusher leaves; the grip stayed closed since its last pose,
     so the next step goes on from that pose instead of looking for the object again."""
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, stale_after=0.3)    # less than the leave takes
@@ -625,8 +625,8 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
 
 
 def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_checked_after(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -651,8 +651,9 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
     """The camera sees nothing (a lens cap) from mid-push until the pusher, its views where it stands
     tried, heads for a vantage place round the grasp axis: seen again, the run goes on to OK. Never
     seen again, the run ends OBJECT_LOST after the vantage places, the grip closed at the hold force."""
-    from dmg_executor.controller import LOOK_PLACES, Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
+    from dmg_executor.controller import LOOK_PLACES
 
     cell, loop, _, _ = loop_parts
     for comes_back in (True, False):
@@ -687,7 +688,7 @@ def test_places_a_look_saw_nothing_from_are_looked_from_last_in_the_runs_later_l
     two places before the third saw a tag)."""
     from dataclasses import replace
 
-    from dmg_planner.transforms import apply
+    from dmg_common.transforms import apply
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -726,7 +727,7 @@ def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface) -> tuple[fl
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
     _half_a_second_into_the_push(loop, executor)
-    began, given_up, views = None, 0, None
+    began, given_up, views, place = None, 0, None, None
     while not executor.done and cell.time < 600.0:
         command = executor.update(loop.observe())
         look = executor.looking
@@ -760,8 +761,8 @@ def test_a_held_object_lost_from_view_on_the_way_to_a_push_is_looked_for_not_giv
     """The camera sees nothing from just after the pusher sets off for its first push: once the held
     object has gone unseen for `stale_after_held`, the push is put off and the object looked for;
     seen again, the run goes on to OK."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, stale_after_held=3.0)
@@ -806,7 +807,8 @@ def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, b
     down by less than NO_HEADWAY tolerances (0.25 mm here), with the grasp within SETTLED_SHARE of
     the goal's tolerance, is the last - the run ends OK from where it is. With headway, or outside
     that share, the primitive is pushed again."""
-    from dmg_executor.controller import SETTLED_SHARE, Outcome
+    from dmg_executor.contract import Outcome
+    from dmg_executor.controller import SETTLED_SHARE
 
     executor, seen = _pushed_once(loop_parts, box_surface, 0.002, headway, position_tolerance=0.0005,
                                      goal_position_tolerance=goal_tolerance)
@@ -822,8 +824,8 @@ def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, b
 def test_a_blind_push_is_judged_short_only_by_a_pose_certain_of_its_position(loop_parts, box_surface):
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -852,7 +854,7 @@ def _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surfac
     is and pushed blind. Returns the box's true pose as each push began and the executor."""
     from dataclasses import replace
 
-    from dmg_planner.transforms import invert
+    from dmg_common.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, length=0.004)
@@ -881,8 +883,8 @@ def _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surfac
 
 def test_a_blind_push_that_falls_short_of_the_face_makes_the_next_push_that_way_reach_further(loop_parts, box_surface):
     """Planned 3.5 mm short, a push ending at the 1 mm tolerance stops 0.5 mm short of the face."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell = loop_parts[0]
     pushes, executor = _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surface, 0.0035)
@@ -902,8 +904,8 @@ def test_a_blind_push_that_moves_the_object_less_than_believed_makes_the_next_pu
     believed (that 1 mm, and the ~0.9 mm the pusher goes past the face before the box gives way);
     the next push that way reaches that much further and ends the translation within 1 mm. Without
     the rule three pushes left it 2.1 mm off (each within the retry factor of the tolerance)."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell = loop_parts[0]
     pushes, executor = _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surface, 0.001)
@@ -972,8 +974,9 @@ def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(l
     that cannot turn (its command's turn zeroed there: joints at their limits) leaves it at the waypoint
     turned otherwise. That view is not needed to go on: it passes the waypoint after `stall_time` and
     the push is made (without the rule the push was given up, never again that way)."""
-    from dmg_executor.controller import WAYPOINT_TURN_TOLERANCE, Outcome
-    from dmg_planner.transforms import turn_between
+    from dmg_common.transforms import turn_between
+    from dmg_executor.contract import Outcome
+    from dmg_executor.controller import WAYPOINT_TURN_TOLERANCE
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -998,7 +1001,7 @@ def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(l
 
 
 def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_home(loop_parts, box_surface):
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1033,7 +1036,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
 
 def _grasp_axis_tilt_deg(cell, executor) -> float:
     """How far [deg] gripper 1's grasp axis on the object (ground truth) is tilted off the goal grasp's."""
-    from dmg_planner.transforms import invert
+    from dmg_common.transforms import invert
 
     reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
     return float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
@@ -1048,6 +1051,7 @@ def bracket_run(loop_parts):
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_common.transforms import invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
@@ -1056,7 +1060,6 @@ def bracket_run(loop_parts):
     from dmg_planner.graph import GraphParameters, build_graph
     from dmg_planner.objects import load_object
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import invert
 
     cell = loop_parts[0]
     model = load_object("bracket")
@@ -1086,8 +1089,8 @@ def bracket_run(loop_parts):
 
 
 def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(bracket_run):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert, turn_between
+    from dmg_common.transforms import distance, invert, turn_between
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     # Without turning the bracket, the far-side push would put the pusher's hand through gripper 1.
@@ -1125,8 +1128,8 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     those fingers are, can be pushed. The pusher (gripper 1 turned a quarter for its fingers to point along
     the grasp axis) pushes it with its tips open either side of gripper 1's fingers, and closes them again
     once out of their way."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, -0.012))
@@ -1155,8 +1158,8 @@ def _pusher_in_the_bracket_corner(bracket_run):
     keep-out box than ESCAPE_DEPTH; and the way down onto the plate there (holder frame)."""
     from dataclasses import replace
 
+    from dmg_common.transforms import apply, invert
     from dmg_executor.routes import ESCAPE_DEPTH
-    from dmg_planner.transforms import apply, invert
 
     cell, loop, make = bracket_run
     executor = make()
@@ -1180,8 +1183,8 @@ def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_cam
     corner between plate and wall) starts deep inside it. A pusher stopped on that push's line (the
     object unseen on its way in) has no straight way out of the box that misses the object: its route
     anywhere first backs out along the line it came in on (before, RouteError: no route, the run ended)."""
+    from dmg_common.transforms import apply, invert
     from dmg_executor.controller import _Push
-    from dmg_planner.transforms import apply, invert
 
     executor, observation, down = _pusher_in_the_bracket_corner(bracket_run)
     corner, to_holder = observation.pusher[:3, 3], invert(observation.holder)
@@ -1200,7 +1203,7 @@ def test_a_holder_turn_the_pusher_has_no_route_out_of_the_way_of_is_forgone_not_
     """The pusher deep in the bracket's corner off any push line (no way out): a turn of gripper 1 not yet
     begun is given up with a note and not tried again, the run goes on (before: LIMIT_VIOLATION); a turn
     back - the object turned away - cannot be given up: that ends the run LIMIT_VIOLATION, saying why."""
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     executor, observation, _ = _pusher_in_the_bracket_corner(bracket_run)
     executor.push = None
@@ -1218,11 +1221,11 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     set back from the wall's plane the lower one starts inside the plate - its way in goes through it.
     That start is refused, saying so; higher up the wall, clear of the plate (TIP_CLEARANCE all round
     both tips), the push is taken."""
-    from dmg_executor.controller import fingertip_shells, push_start
+    from dmg_common.transforms import apply, invert
+    from dmg_executor.fingertips import fingertip_shells, push_start
     from dmg_executor.push_points import PushPoint
     from dmg_executor.routes import RouteError
     from dmg_executor.views import Occluders
-    from dmg_planner.transforms import apply, invert
 
     cell, loop, make = bracket_run
     executor = make(seeing=False)
@@ -1248,8 +1251,8 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
 
 
 def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket_run):
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import turn_between
+    from dmg_common.transforms import turn_between
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     executor = make()
@@ -1283,8 +1286,8 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     press along the grasp axis beside the grasp turns it back to within 1 deg, the grip at the hold force
     while pressing, and the run ends OK with the axis still within `level_tilt_deg` (sim: 3.9 -> 0.3 deg in
     1.5 s at ~1 N)."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance, invert
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     tilt = lambda executor: _grasp_axis_tilt_deg(cell, executor)   # noqa: E731
@@ -1317,8 +1320,8 @@ def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the
     taken while it turns are made to show it level (a pose from a moving object). Those are not trusted: the
     press is still judged from the pose seen before the turn, made, and levels the bracket (judged from the
     mid-turn pose, the press was taken as done before it began)."""
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import invert
+    from dmg_common.transforms import invert
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
@@ -1347,7 +1350,7 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
     face. A press the camera saw made is judged, and the next planned, as the holder stands; it turns back
     once, when the bracket is level or the next press needs the holder as it was (before: it turned back
     after every press to judge it and turned again for the next, and ran out of time at 150 s)."""
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=4.0, tilt_axis=(0.0, 0.92, 0.38))
@@ -1382,8 +1385,8 @@ def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_toleranc
     of 3 here), and never a fourth."""
     from dataclasses import replace
 
+    from dmg_common.transforms import invert
     from dmg_executor.controller import LEVEL_PUSHES, SETTLED_SHARE
-    from dmg_planner.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, length=0.005)
@@ -1403,10 +1406,10 @@ def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_
     """A push line that leaves the space kept free round the object through its palm end would bring
     the pusher 300 mm up along gripper 1's hand and arm (sim: 12 s with the object unseen, then
     OBJECT_LOST): refused, while one across the fingers from the same grasp is routed."""
+    from dmg_common.transforms import invert
     from dmg_executor.push_points import PushPoint
     from dmg_executor.routes import RouteError
     from dmg_executor.views import Occluders
-    from dmg_planner.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1433,10 +1436,10 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     It goes back to where it started, the box held as it is, and the push is found from there."""
     from scipy.spatial.transform import Rotation
 
+    from dmg_common.transforms import distance, invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.settings import ExecutorSettings
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import distance, invert
 
     cell, loop, graph, tags = loop_parts
 
@@ -1478,7 +1481,7 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
 def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loop_parts, box_surface):
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1508,7 +1511,7 @@ def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loo
 def test_a_held_object_seen_moved_is_a_slip_only_by_poses_certain_of_their_position(loop_parts, box_surface):
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1586,7 +1589,7 @@ def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_w
     shows nothing new)."""
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1621,7 +1624,7 @@ def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_pose
     SLIP, a note, and the reference is the object's pose again."""
     from dataclasses import replace
 
-    from dmg_planner.transforms import distance
+    from dmg_common.transforms import distance
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1651,7 +1654,7 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
 
     from scipy.spatial.transform import Rotation
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1714,8 +1717,8 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     again. Here the camera shows the object stuck after it has turned 2 deg with the pusher."""
     from dataclasses import replace
 
+    from dmg_common.transforms import invert
     from dmg_executor.controller import _turned_since
-    from dmg_planner.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _rotation_executor(loop_parts, box_surface)
@@ -1776,8 +1779,8 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
     `rotation_slide` on the object. Here the camera shows the object moving with the pusher, not turning."""
     from dataclasses import replace
 
+    from dmg_common.transforms import invert
     from dmg_executor.controller import _slid_since
-    from dmg_planner.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _rotation_executor(loop_parts, box_surface)
@@ -1804,8 +1807,9 @@ def test_a_rotation_pushers_sweep_meets_a_face_across_it_not_one_it_runs_along(b
     face, 18 mm off the axis along it, the sweep runs into the face within a few degrees; over the top
     face, straight above the axis, it runs along the face and comes no nearer within SWEEP_LIMIT (such
     a push is not planned; sim: eight pushes taken to have missed the stepped block)."""
-    from dmg_executor.controller import SWEEP_LIMIT, sweep_to_touch
-    from dmg_planner.transforms import from_rotation
+    from dmg_common.transforms import from_rotation
+    from dmg_executor.controller import SWEEP_LIMIT
+    from dmg_executor.fingertips import sweep_to_touch
 
     radius, holder, box_pose = 0.008, np.eye(4), np.eye(4)        # the grasp axis along x through the box's centre
     beside = from_rotation(np.eye(3), [0.0, 0.03 + radius + 0.001, 0.018])   # tips side by side along x, 1 mm off
@@ -1824,12 +1828,12 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     their tips has its full lever (sim probe: the rotation was left 8 deg off the goal)."""
     from dataclasses import replace
 
+    from dmg_common.transforms import apply, invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
     from dmg_planner.objects import Box, box_union_mesh
     from dmg_planner.primitives import Primitive, PrimitiveKind
-    from dmg_planner.transforms import apply, invert
 
     cell, loop, _, _ = loop_parts
     stem = Box(np.array([0.0, 0.0, 0.02]), np.array([0.03, 0.04, 0.04]))      # 30 x 40 x 40 mm
@@ -1862,8 +1866,8 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     MISSED_TURN beyond the sweep that brings its tips onto the face, and the next push is planned elsewhere."""
     from dataclasses import replace
 
+    from dmg_common.transforms import invert
     from dmg_executor.controller import MISSED_NEAR, MISSED_TURN, _turned_since
-    from dmg_planner.transforms import invert
 
     cell, loop, _, _ = loop_parts
     executor = _rotation_executor(loop_parts, box_surface)
@@ -1956,7 +1960,7 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     """Backing out after a push, and again on its way home after the last one, the pushing arm stops
     (a joint at its limit): after `stall_time` the run goes on from there, and ends there, with
     notes instead of waiting out the step's time limit."""
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1985,8 +1989,8 @@ def test_a_rotation_is_not_pushed_from_where_the_camera_would_see_no_tag(loop_pa
     of the grip or turned in the air."""
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
-    from dmg_planner.transforms import distance
+    from dmg_common.transforms import distance
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     backwards = np.diag([1.0, -1.0, -1.0, 1.0])      # the optical axis turned round
@@ -2044,7 +2048,7 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
     judged by the certain pose the grip has held since, not by them."""
     from dataclasses import replace
 
-    from dmg_executor.controller import Outcome
+    from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -2081,6 +2085,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_common.transforms import invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
@@ -2089,7 +2094,6 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
     from dmg_planner.graph import GraphParameters, build_graph
     from dmg_planner.objects import load_object
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import invert
 
     cell = loop_parts[0]
     model = load_object("plug")
@@ -2129,6 +2133,7 @@ def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(lo
     from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
+    from dmg_common.transforms import invert, turn_between
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
@@ -2137,7 +2142,6 @@ def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(lo
     from dmg_planner.graph import GraphParameters, build_graph
     from dmg_planner.objects import load_object
     from dmg_planner.search import GripperPose, plan
-    from dmg_planner.transforms import invert, turn_between
 
     cell = loop_parts[0]
     model = load_object("plug")

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import DMG, Processes, RosTestNode
-from dmg_planner.transforms import distance, homogeneous, invert
+from dmg_common.transforms import distance, homogeneous, invert
 
 pytestmark = pytest.mark.ros
 
@@ -27,14 +27,13 @@ class Operator(RosTestNode):
 
     def __init__(self) -> None:
         super().__init__("executor_test_operator")
+        from dmg_interfaces.action import ExecuteRepositioning
+        from dmg_interfaces.msg import ExecutorState, GripperState
+        from dmg_interfaces.srv import PlanRepositioning, ResetScene
         from geometry_msgs.msg import PoseStamped
         from rclpy.action import ActionClient
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Bool
-
-        from dmg_interfaces.action import ExecuteRepositioning
-        from dmg_interfaces.msg import ExecutorState, GripperState
-        from dmg_interfaces.srv import PlanRepositioning, ResetScene
 
         self.Action, self.Plan, self.Reset, self.Bool = ExecuteRepositioning, PlanRepositioning, ResetScene, Bool
         self.latest: dict[str, object] = {}
@@ -63,7 +62,7 @@ class Operator(RosTestNode):
         return self.truth()
 
     def plan(self, start: np.ndarray, goal: np.ndarray):
-        from dmg_bringup.geometry_messages import pose_message
+        from dmg_common.ros.geometry_messages import pose_message
 
         response = self.call(self.planner, self.Plan.Request(object_id="box", start=pose_message(start),
                                                              goal=pose_message(goal)))
@@ -147,7 +146,7 @@ def test_two_primitive_goal_is_planned_from_the_seen_grasp_and_completes(cell):
     goal = start.copy()
     goal[:3, :3] = Rotation.from_rotvec(ROTATION * start[:3, 0]).as_matrix() @ start[:3, :3]
     goal[:3, 3] += 0.012 * goal[:3, 2]
-    from dmg_bringup.geometry_messages import pose_message
+    from dmg_common.ros.geometry_messages import pose_message
 
     result = cell.result(cell.send(object_id="box", goal=pose_message(goal), alpha=1.0))
     assert result.success, result.message

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from dmg_common.transforms import distance, from_rotation, invert
 from dmg_perception.estimator import EstimationError, ObjectPoseEstimator
 from dmg_perception.images import ImageError, grey_image
 from dmg_perception.pose_buffer import PoseBuffer
 from dmg_perception.tracker import Tracker, TrackingState
 from dmg_planner.objects import load_object, object_names
-from dmg_planner.transforms import distance, from_rotation, invert
 from dmg_sim_bridge.cell import Cell, default_grasp
 
 

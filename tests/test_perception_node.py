@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import DMG, REPO, Processes, RosTestNode
-from dmg_planner.transforms import distance, homogeneous
+from dmg_common.transforms import distance, homogeneous
 
 pytestmark = pytest.mark.ros
 
@@ -20,12 +20,11 @@ class Watcher(RosTestNode):
     def __init__(self) -> None:
         super().__init__("perception_test_watcher")
         from diagnostic_msgs.msg import DiagnosticArray
+        from dmg_interfaces.msg import PerceptionStatus, TagDetections
+        from dmg_interfaces.srv import ResetScene
         from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
         from rclpy.qos import QoSProfile
         from sensor_msgs.msg import Image
-
-        from dmg_interfaces.msg import PerceptionStatus, TagDetections
-        from dmg_interfaces.srv import ResetScene
 
         self.Image, self.ResetScene = Image, ResetScene
         self.latest, self.truth, self.diagnostics = {}, [], {}

@@ -8,9 +8,10 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+from dmg_common.config import config_dir
+from dmg_common.transforms import distance, invert, turn_between
 from dmg_perception.tags import detector, tag_corners
-from dmg_planner.objects import config_dir, load_object, object_names
-from dmg_planner.transforms import distance, invert, turn_between
+from dmg_planner.objects import load_object, object_names
 from dmg_sim_bridge.cell import Cell, CellError
 from dmg_sim_bridge.gripper import GripperSpec
 from dmg_sim_bridge.recording import FrameRecorder

@@ -67,10 +67,10 @@ def test_the_loosened_grip_the_executor_picks_keeps_the_bracket_from_tilting_whe
     weight's turn across the grasp axis it tilts; at the executor's margin over that it stays put."""
     import math
 
+    from dmg_common.transforms import invert
     from dmg_executor.grip import tilt_hold_force
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.settings import ExecutorSettings
-    from dmg_planner.transforms import invert
     from dmg_sim_bridge.cell import Cell
 
     settings = ExecutorSettings.defaults()

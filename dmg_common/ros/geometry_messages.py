@@ -7,7 +7,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Pose
 
-from dmg_planner.transforms import homogeneous, position_quaternion
+from dmg_common.transforms import homogeneous, position_quaternion
 
 QUATERNION_TOLERANCE = 1e-3
 

@@ -1,4 +1,4 @@
-"""Where the project's files are and which environment its ROS processes need.
+"""The environment variables a ROS process of this project needs (ROS-free).
 
 The ROS 2 wheels run without a sourced setup file, so the few variables a sourced
 workspace would provide are set here, for this process and for every child the CLI starts.
@@ -8,14 +8,8 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Any
 
-import yaml
-
-REPO_ROOT = Path(__file__).resolve().parent.parent
-
-
-from dmg_planner.objects import config_dir  # noqa: E402 - one definition of where config/ is
+from dmg_common.config import config_dir
 
 
 def fastdds_profile() -> Path:
@@ -43,26 +37,3 @@ def ros_environment(base: dict[str, str] | None = None) -> dict[str, str]:
 def apply_ros_environment() -> None:
     """Complete os.environ in place; call before rclpy.init() so the DDS profile applies."""
     os.environ.update(ros_environment())
-
-
-def load_parameter_spec(name: str) -> dict[str, dict[str, Any]]:
-    """The `parameters` mapping of config/<name>.yaml (defaults, descriptions, ranges)."""
-    path = config_dir() / f"{name}.yaml"
-    document = yaml.safe_load(Path(path).read_text()) or {}
-    spec = document.get("parameters")
-    if not isinstance(spec, dict):
-        raise ValueError(f"{path} has no 'parameters' mapping")
-    return spec
-
-
-def parameter_defaults(name: str) -> dict[str, Any]:
-    """The default value of every parameter in config/<name>.yaml (for ROS-free cores and tests)."""
-    return {key: entry["value"] for key, entry in load_parameter_spec(name).items()}
-
-
-def load_settings(settings_class: type, name: str, overrides: dict[str, Any]):
-    """A command's settings dataclass from config/<name>.yaml, with the command line's given
-    (non-None) values on top."""
-    values = yaml.safe_load((config_dir() / f"{name}.yaml").read_text())
-    values.update({k: v for k, v in overrides.items() if v is not None and k in settings_class.__dataclass_fields__})
-    return settings_class(**values)

@@ -19,7 +19,7 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from dmg_bringup.environment import load_parameter_spec
+from dmg_common.config import load_parameter_spec
 
 
 def _descriptor(name: str, entry: dict[str, Any]) -> ParameterDescriptor:

@@ -5,7 +5,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from dmg_bringup.environment import apply_ros_environment
+from dmg_common.environment import apply_ros_environment
 
 
 def run_node(prog: str, description: str, epilog: str, argv: list[str] | None, make_node: Callable,
@@ -31,7 +31,7 @@ def run_node(prog: str, description: str, epilog: str, argv: list[str] | None, m
         print(f"{prog}: cannot start: {error}{hint}", file=sys.stderr)
         rclpy.try_shutdown()
         return 1
-    executor = SingleThreadedExecutor()   # not the multi-threaded one: see dmg_bringup.waiting
+    executor = SingleThreadedExecutor()   # not the multi-threaded one: see dmg_common.ros.waiting
     executor.add_node(node)
     try:
         executor.spin()
