@@ -33,10 +33,20 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_common.transforms import apply, distance, from_rotation, invert, turn_between
+from dmg_executor.belief import HeldPose, PoseTrust
 from dmg_executor.contract import Command, GripCommand, Observation, Outcome, Progress, Result, Step
 from dmg_executor.ects import arm_twists
 from dmg_executor.fingertips import fingertip_shells, leading_tip, meeting_start, push_start, sweep_to_touch
 from dmg_executor.grip import tilt_hold_force
+from dmg_executor.monitors import (
+    SlipStreak,
+    limit_violation,
+    moved_in_grip,
+    poses_agree,
+    tilt_since,
+    tilted_while_pushed,
+    turn_since,
+)
 from dmg_executor.push_points import (
     ObjectSurface,
     PushError,
@@ -202,10 +212,6 @@ def _rotation_about_axis(rotation: np.ndarray) -> float:
     return float(Rotation.from_matrix(rotation).as_rotvec()[0])
 
 
-def _mean_pose(poses: np.ndarray) -> np.ndarray:
-    """The mean of (n, 4, 4) poses of one still object: mean rotation, mean position."""
-    return from_rotation(Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix(), poses[:, :3, 3].mean(axis=0))
-
 
 def _torque_axis(middle: np.ndarray, push: PushPoint) -> np.ndarray:
     """Unit axis through `middle` that a push at `push` turns the object about (object frame)."""
@@ -305,14 +311,11 @@ class PlanExecutor:
         self.pusher_spread = 0.0        # m between the pusher's fingertip centres as last commanded (0: closed)
         self.opened_at = -math.inf      # when the pusher opened for a straddle push
         self.waypoint = 0
-        self.held_reference: np.ndarray | None = None   # object pose the grip must keep, or None while pushing
-        self.held_sigma = 0.0                 # m, position uncertainty of that pose
-        self.held_poses: list[np.ndarray] = []   # the certain poses averaged into it (reference_poses at most)
-        self.held_pose_time = -math.inf       # when the last of them was seen
+        self.trust = PoseTrust(settings.slip_position_sigma, settings.slip_tilt_sigma, settings.reference_poses)
+        self.held = HeldPose(self.trust)      # the object pose the closed grip must keep
         self.pushed_reference: np.ndarray | None = None
         self.grip_until = -math.inf
         self.phase = ""
-        self.reference_pending = False
         self.looking: _Look | None = None
         self.searching = False          # the held object went unseen on the way to a push: look for it
         self.seeking_certain = False    # ... or the plan's end is to be judged from an uncertain pose: look for a certain one
@@ -320,8 +323,7 @@ class PlanExecutor:
         self.error_before_push = math.inf   # the current primitive's error when its last push was planned
         self.settled = False            # near the goal, and pushes make no headway: no more of them
         self.headway: _Headway | None = None
-        self.slip_streak: list[np.ndarray] = []   # consecutive fresh poses (holder frame) that each showed a slip
-        self.slip_pose_time = -math.inf
+        self.slip_streak = SlipStreak()
         self.unreachable: list[np.ndarray] = []   # push directions (base frame) whose start the pusher could not reach
         self.shortfalls: list[tuple[np.ndarray, float]] = []   # (push direction in the holder frame, m): see _judge_blind_push
         self.pushed_from = np.eye(4)      # pusher in the holder's frame where the current push began
@@ -416,7 +418,7 @@ class PlanExecutor:
         # 7-10 mm off); the held pose is known.
         trusted = self._trusted(obs)
         fresh = self._fresh(obs)
-        self.searching = self.searching and not (fresh and (not self.seeking_certain or self._certain(obs)))
+        self.searching = self.searching and not (fresh and (not self.seeking_certain or self.trust.certain(obs)))
         self.seeking_certain = self.seeking_certain and self.searching
         if self._pushing() and s.blind_pushes:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
@@ -440,17 +442,17 @@ class PlanExecutor:
             if obs.object_position_sigma <= s.slip_position_sigma:
                 self._judge_blind_push(obs)
             self.reckoned = None
-        if fresh and self.reckoned is None and (self.reference_pending or self._reference_uncertain(obs)):
-            self._hold(obs)     # the first fresh pose since the grip closed, or a more certain one
+        if fresh and self.reckoned is None and (self.held.pending or self.held.outdone_by(obs)):
+            self.held.take(obs)     # the first fresh pose since the grip closed, or a more certain one
         fault = self._limits(obs) or (self._slip(obs) if trusted else None)
         if fault:
             return self._abort(*fault)
-        if fresh and self.reckoned is None and not self.slip_streak:
-            self._average_held(obs)
+        if fresh and self.reckoned is None and not self.slip_streak.poses:
+            self.held.fold_in(obs)
         if self.reckoned is not None:
             obs = replace(obs, object_in_holder=self.reckoned)    # pushed, not seen since: where it went
-        elif self._held_better_than(obs):
-            obs = replace(obs, object_in_holder=self.held_reference)   # held still since a certain pose
+        elif self.held.better_than(obs):
+            obs = replace(obs, object_in_holder=self.held.reference)   # held still since a certain pose
         if obs.time - self.step_started > s.step_timeout:
             return self._abort(Outcome.STEP_TIMEOUT, f"{self.step.name} of primitive {self.index} did not finish in "
                                f"{s.step_timeout:.1f} s (contact error {self.errors[0] * 1000:.1f} mm, angle error "
@@ -487,57 +489,22 @@ class PlanExecutor:
         """Start a step with the grip closed: from here the object must not move in it (from the
         next fresh pose on, if the last one is stale: the object moved while unseen)."""
         self.step, self.step_started = step, obs.time
-        if self.held_reference is not None and self.reckoned is None:
+        if self.held.reference is not None and self.reckoned is None:
             return      # held since its pose was seen, the grip closed all along: still where it was seen
         # (an object pushed unseen is where dead reckoning puts it, not seen there: no reference yet)
-        self.reference_pending = obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None
-        if self.reference_pending:
-            self.held_reference = None
+        if obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None:
+            self.held.await_fresh()
         else:
-            self._hold(obs)
-
-    def _hold(self, obs: Observation) -> None:
-        """Take this pose as the one the closed grip must keep."""
-        self.held_reference, self.held_sigma = obs.object_in_holder.copy(), obs.object_position_sigma
-        self.held_poses = [self.held_reference] if self._certain(obs) else []
-        self.held_pose_time = obs.object_time
-        self.reference_pending = False
-
-    def _average_held(self, obs: Observation) -> None:
-        """Fold a new certain pose that shows no slip into the held reference, up to `reference_poses`
-        of them: the object is still in the closed grip, so their mean is the better estimate (sim:
-        a lone tag's poses scatter 0.3 mm median, 2 mm p90, one 5.8 mm off while 0.8 mm sure of it -
-        a reference taken from it made a still object look slipped). Then the reference stays, so a
-        slow slip still shows against it."""
-        if (self.held_reference is None or not self.held_poses or len(self.held_poses) >= self.settings.reference_poses
-                or obs.object_time <= self.held_pose_time or not self._certain(obs)):
-            return
-        self.held_poses.append(obs.object_in_holder.copy())
-        self.held_pose_time = obs.object_time
-        self.held_reference = _mean_pose(np.array(self.held_poses))
+            self.held.take(obs)
 
     def _pushing(self) -> bool:
         return self.step == Step.EXECUTE and self.phase in ("touch", "push")
-
-    def _certain(self, obs: Observation) -> bool:
-        """Is this pose certain enough of both its position and its tilt to show a slip (and so to be
-        trusted where a view may mislead)?"""
-        s = self.settings
-        return obs.object_position_sigma <= s.slip_position_sigma and obs.object_tilt_sigma <= s.slip_tilt_sigma
-
-    def _reference_uncertain(self, obs: Observation) -> bool:
-        """Whether the held reference is too uncertain to tell a slip and this pose would do better
-        (a pose a few mm off would make a good grip look like a slip)."""
-        limit = self.settings.slip_position_sigma
-        return (self.held_reference is not None and self.held_sigma > limit
-                and obs.object_position_sigma <= limit)
 
     def _end_uncertain(self) -> bool:
         """Is the plan's last primitive (or correction) about to be judged from a held pose too uncertain of its
         position to tell, with no look for a better one since the last push? (sim, plug: a lone tag seen
         obliquely at the end, 1.2-3.6 mm sigma, put a grasp 2.5 mm from its goal 2.4-8.1 mm from it.)"""
-        return not self.sought_certain and (self.held_reference is None
-                                            or self.held_sigma > self.settings.slip_position_sigma)
+        return not self.sought_certain and self.held.uncertain
 
     def _push_reference(self, obs: Observation) -> np.ndarray:
         """The pose a push starts from: the latest seen, if fresh and certain - the push's own poses are
@@ -546,33 +513,25 @@ class PlanExecutor:
         a level press took the difference for the object turning back and stopped closing its gap) - else
         the held reference (a blind push)."""
         seen = self.last
-        if seen.object_in_holder is not None and self._fresh(seen) and self._certain(seen):
+        if seen.object_in_holder is not None and self._fresh(seen) and self.trust.certain(seen):
             return seen.object_in_holder.copy()
         return obs.object_in_holder.copy()
 
     def _trusted(self, obs: Observation) -> bool:
         """Is this pose from an image worth trusting: not taken while the holder turns, nor of the object
         turned away unless certain?"""
-        return self.holder_turn is None and (not self.far_side or self._certain(obs))
+        return self.holder_turn is None and (not self.far_side or self.trust.certain(obs))
 
     def _fresh(self, obs: Observation) -> bool:
         """A trusted pose no older than `stale_after`."""
         return self._trusted(obs) and obs.time - obs.object_time <= self.settings.stale_after
-
-    def _held_better_than(self, obs: Observation) -> bool:
-        """Is the held reference (a pose certain of its position, the grip closed since) a better account
-        of where the object is than this pose: one too uncertain to show that it moved, or any single
-        pose once the reference averages several?"""
-        limit = self.settings.slip_position_sigma
-        return (self.held_reference is not None and self.held_sigma <= limit
-                and (obs.object_position_sigma > limit or len(self.held_poses) > 1))
 
     def _find_contact(self, obs: Observation) -> Command:
         if self.holder_turn is not None:
             return self._turn_holder(obs)
         if self.far_side_pushed:
             return self._start_holder_turn(obs, back=True)     # to see what the push did
-        if (self.reference_pending or self.searching) and not self.far_side:
+        if (self.held.pending or self.searching) and not self.far_side:
             return self._look_around(obs)     # plan the next push from a fresh pose
         self.looking = None
         while self.index < len(self.primitives) and self._primitive_finished(obs):
@@ -754,7 +713,7 @@ class PlanExecutor:
             turn.progress = (math.inf if turn.home is not None else 0.0, obs.time)   # (turned or left, when)
             # The grip is closed: the object stays where it was seen; the next reference is the first
             # image after the turn back.
-            self.held_reference, self.reference_pending = None, True
+            self.held.await_fresh()
             self.reckoned, self.reckoned_time = obs.object_in_holder.copy(), math.inf
         if turn.home is not None:
             return self._holder_home(obs)
@@ -1328,8 +1287,7 @@ class PlanExecutor:
         sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
         if len(poses) < 2 or sigma > self.settings.slip_position_sigma:
             return False
-        self.held_reference = _mean_pose(poses)
-        self.held_sigma, self.held_poses, self.held_pose_time = sigma, [self.held_reference], seen.object_time
+        self.held.take_mean(poses, sigma, seen.object_time)
         self.searching = self.seeking_certain = False
         self.notes.append(f"primitive {self.index} judged from the mean of {len(poses)} poses seen from as many "
                           f"views ({sigma * 1000:.1f} mm)")
@@ -1362,7 +1320,7 @@ class PlanExecutor:
             return self._along_route(obs)
         if self.seeking_certain:     # seen, if not for certain: judged from what was seen
             self.searching = self.seeking_certain = False
-            self.notes.append(f"primitive {self.index} judged from a pose uncertain by {self.held_sigma * 1000:.1f} mm: "
+            self.notes.append(f"primitive {self.index} judged from a pose uncertain by {self.held.sigma * 1000:.1f} mm: "
                               f"none of {look.gone_to} vantage place(s) gave a certain one")
             return Command()
         return self._abort(Outcome.OBJECT_LOST, f"object pose lost (last seen {obs.time - obs.object_time:.1f} s ago): "
@@ -1448,7 +1406,8 @@ class PlanExecutor:
         if self.phase == "loosen":
             if obs.time < self.grip_until:
                 return Command(holder_grip=self._held() if self._leveling else self._loosened(obs))
-            self.phase, self.held_reference = "push", None
+            self.phase = "push"
+            self.held.reference = None
             # A level press the camera sees needs no turn back to be judged: the next is planned as the holder stands.
             self.pressed_turned = self.far_side and self._leveling and not self.push.blind
             self.far_side_pushed = self.far_side and not self.pressed_turned
@@ -1505,7 +1464,7 @@ class PlanExecutor:
         if forced > FORCED_OPEN:
             return self._stop_push(obs, f"the object forced gripper 1's fingers {forced * 1000:.1f} mm wider than its "
                                         "grasp (turning over in the grip)")
-        tilted = self._tilted_since_push(obs.object_in_holder) if self._fresh(obs) else 0.0
+        tilted = tilt_since(self.pushed_reference, obs.object_in_holder) if self._fresh(obs) else 0.0
         if PUSH_TILT_STOP * s.slip_angle < tilted <= s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
             return self._stop_push(obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if primitive.kind == PrimitiveKind.TRANSLATION:
@@ -1615,7 +1574,7 @@ class PlanExecutor:
         if (s.tilt_gain == 0.0 or self.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
                 or obs.time - obs.object_time > s.stale_after or self._push_spread):
             return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers)
-        tilt = self._turn_since_push(obs.object_in_holder)
+        tilt = turn_since(self.pushed_reference, obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
         local = self.push.local_direction
         lever = -float(pusher[:3, 3] @ local) - self._reach(local, pusher[:3, :3])
@@ -1710,8 +1669,8 @@ class PlanExecutor:
         if not self.returning:
             self.returning = True
             self.step, self.step_started = Step.LEAVE, obs.time
-            if self.held_reference is None:
-                self._hold(obs)
+            if self.held.reference is None:
+                self.held.take(obs)
             try:
                 self._head_home(obs)
             except RouteError as error:
@@ -1896,17 +1855,8 @@ class PlanExecutor:
                 distance(invert(obs.object_in_holder), last.gripper_after)[1])
 
     def _limits(self, obs: Observation) -> tuple[Outcome, str] | None:
-        s = self.settings
-        for name, pose in (("holding", obs.holder), ("pushing", obs.pusher)):
-            where = pose[:3, 3]
-            if np.any(where < s.workspace_min) or np.any(where > s.workspace_max):
-                return Outcome.LIMIT_VIOLATION, (f"the {name} gripper at {np.round(where, 3).tolist()} m left the "
-                                                 f"workspace {s.workspace_min.tolist()} .. {s.workspace_max.tolist()}")
-        travel = float(np.linalg.norm(obs.holder[:3, 3] - self.holder_start[:3, 3]))
-        if travel > s.holder_travel:
-            return Outcome.LIMIT_VIOLATION, (f"the holding gripper moved {travel * 1000:.0f} mm from its start "
-                                             f"(limit {s.holder_travel * 1000:.0f} mm)")
-        return None
+        why = limit_violation(obs, self.holder_start, self.settings)
+        return None if why is None else (Outcome.LIMIT_VIOLATION, why)
 
     def _slip(self, obs: Observation) -> tuple[Outcome, str] | None:
         """A slip once `slip_poses` poses in a row show one: a single stray estimate is none. Nor is a held
@@ -1915,56 +1865,30 @@ class PlanExecutor:
         and 5.0 deg off, 0.75 mm sure of itself, then good poses 0.3-0.5 mm off read as a slip)."""
         fault = self._slip_in(obs)
         if fault is None:
-            self.slip_streak = []
+            self.slip_streak.clear()
             return None
-        if obs.object_time != self.slip_pose_time:
-            self.slip_pose_time = obs.object_time
-            self.slip_streak.append(obs.object_in_holder.copy())
-        if len(self.slip_streak) < self.settings.slip_poses:
+        streak = self.slip_streak
+        if streak.add(obs) < self.settings.slip_poses:
             return None
-        if self.held_reference is not None and len(self.held_poses) == 1 and self._agree(self.slip_streak):
-            self.notes.append(f"the pose the grip's reference was taken from disagreed with the {len(self.slip_streak)} "
+        if self.held.reference is not None and len(self.held.poses) == 1 and poses_agree(streak.poses, self.settings):
+            self.notes.append(f"the pose the grip's reference was taken from disagreed with the {len(streak.poses)} "
                               f"after it, which agree: a stray pose, the reference taken again ({fault[1]})")
-            self._hold(obs)
-            self.slip_streak = []
+            self.held.take(obs)
+            streak.clear()
             return None
         return fault
-
-    def _agree(self, poses: list[np.ndarray]) -> bool:
-        """Are these object poses each within the slip limits of the last?"""
-        s = self.settings
-        return all(moved <= s.slip_distance and turned <= s.slip_angle
-                   for moved, turned in (distance(pose, poses[-1]) for pose in poses[:-1]))
-
-    def _turn_since_push(self, object_in_holder: np.ndarray) -> np.ndarray:
-        """Rotation vector (holder frame) the pushed object has turned by since the push began."""
-        return Rotation.from_matrix(object_in_holder[:3, :3] @ self.pushed_reference[:3, :3].T).as_rotvec()
-
-    def _tilted_since_push(self, object_in_holder: np.ndarray) -> float:
-        """rad the pushed object has turned about axes across the grasp axis since the push began."""
-        return float(np.linalg.norm(self._turn_since_push(object_in_holder)[1:]))
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
         its position), or tilted while pushed (by a pose certain enough of its tilt; once the grip has
         closed again, only the first kind counts: a pose a few mm off may still be sure of its tilt)."""
-        s = self.settings
-        if self.held_reference is not None:
-            if max(obs.object_position_sigma, self.held_sigma) > s.slip_position_sigma:
-                return None     # no evidence either way
-            moved, turned = distance(self.held_reference, obs.object_in_holder)
-            if moved > s.slip_distance or turned > s.slip_angle:
-                return Outcome.SLIP, (f"the object moved {moved * 1000:.1f} mm and {np.rad2deg(turned):.1f} deg in the "
-                                      f"closed grip during {self.step.name} of primitive {self.index} (that pose's "
-                                      f"uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
-                                      f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
+        if self.held.reference is not None:
+            why = moved_in_grip(obs, self.held, self.settings)
         elif self.pushed_reference is not None and self._pushing():
-            tilt = self._tilted_since_push(obs.object_in_holder)
-            if tilt > s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
-                return Outcome.SLIP, (f"the pushed object tilted {np.rad2deg(tilt):.1f} deg off the grasp axis "
-                                      f"during primitive {self.index} (that pose's uncertainty "
-                                      f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
-        return None
+            why = tilted_while_pushed(obs, self.pushed_reference, self.settings)
+        else:
+            why = None
+        return None if why is None else (Outcome.SLIP, f"{why} during {self.step.name} of primitive {self.index}")
 
     def _abort(self, outcome: Outcome, message: str) -> Command:
         position, angle = self.final_errors(self.last) if self.last.object_in_holder is not None else (math.nan, math.nan)

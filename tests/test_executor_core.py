@@ -619,7 +619,7 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
     assert observation.time - observation.object_time > executor.settings.stale_after     # its pose is stale
     assert not executor.done, executor.result
     assert executor.looking is None and (executor.step.name == "APPROACH" or executor.returning), executor.step
-    assert executor.held_reference is not None
+    assert executor.held.reference is not None
     outcome = loop.run(executor, time_limit=120)
     assert outcome.outcome == Outcome.OK, outcome.message
 
@@ -1641,12 +1641,12 @@ def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_pose
 
     while executor.step.name != "APPROACH" and not executor.done:
         tick(0.006)
-    assert len(executor.held_poses) == 1
+    assert len(executor.held.poses) == 1
     for _ in range(3 * executor.settings.slip_poses):
         tick(0.0)
     assert not executor.done, executor.result
     assert any("a stray pose, the reference taken again" in note for note in executor.notes), executor.notes
-    assert distance(executor.held_reference, cell.object_in_gripper("arm1"))[0] < 0.001
+    assert distance(executor.held.reference, cell.object_in_gripper("arm1"))[0] < 0.001
 
 
 def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_tilt(loop_parts, box_surface):
@@ -2037,7 +2037,7 @@ def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pos
     frozen = executor.last.object_time
     while executor.step.name == "EXECUTE" and cell.time < deadline:     # pushed on, on dead reckoning
         tick(freeze=frozen)
-    assert executor.step.name == "LEAVE" and executor.held_reference is None, (executor.step, executor.result)
+    assert executor.step.name == "LEAVE" and executor.held.reference is None, (executor.step, executor.result)
     for _ in range(3 * s.slip_poses):
         tick(tilt=True)
     assert not executor.done, executor.result
@@ -2067,7 +2067,7 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
 
     while not executor.returning and not executor.done:
         tick()
-    assert executor.held_reference is not None and executor.held_sigma <= executor.settings.slip_position_sigma
+    assert executor.held.reference is not None and executor.held.sigma <= executor.settings.slip_position_sigma
     ends = cell.time + 120.0
     while not executor.done and cell.time < ends:
         tick(uncertain=True)
