@@ -62,96 +62,6 @@ from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, GripperShape, Occluders, TagLayout, overlap, placed, ranked_views, turns
 from dmg_planner.primitives import Primitive, PrimitiveKind
 
-MAX_PUSHES_PER_PRIMITIVE = 4
-MAX_CORRECTIONS = 3    # extra pushes after the plan towards the goal grasp
-RETRY_FACTOR = 2.0    # another push when the remaining error exceeds this many tolerances
-NO_HEADWAY = 0.5      # a push that brought its primitive's error down by less than this many tolerances made none
-SETTLED_SHARE = 0.8   # ... and with the grasp within this share of the goal's tolerances, no push like it follows
-WAYPOINT_TURN_TOLERANCE = np.deg2rad(3.0)
-EXIT_MARGIN = 0.003   # m beyond the keep-out box where a push line starts and a retreat ends
-LEVER_SHARES = np.array([1.0, 0.6, 0.35])   # of push_depth: the rotation levers tried, longest first
-# Where no rotation push through the grasp's middle can be given, push lines this share of the way from the
-# middle to either fingertip (object narrow at the middle, wide near a finger: a T held across its stem's
-# foot and its bar's top - sim probe: the stem's levers all failed, the rotation left 8 deg off).
-OFF_MIDDLE_SHARES = np.array([0.5, -0.5, 0.75, -0.75])
-OTHER_VIEWS = 4       # other pusher orientations tried at a push start where the camera sees nothing
-DISTINCT_VIEW = np.deg2rad(10.0)   # ... each at least this far from those tried before
-TURN_GAIN = np.deg2rad(1.0)   # the object turning this much with the pusher is progress (pose noise: up to 0.5 deg)
-HEADWAY = (0.0005, np.deg2rad(1.0))   # m, rad: getting this much closer to where the pusher goes is headway
-UNREACHABLE_CONE = np.deg2rad(20.0)   # a push within this of one whose start the pusher could not reach is not tried
-FACE_RAYS = 36        # rays round the grasp axis that find the faces a translation can be pushed on
-DETOUR_LIMIT = np.deg2rad(75.0)   # a translation push at most this far off the remaining motion
-SAME_PUSH = np.deg2rad(10.0)   # a rotation push square onto a face this close to one across or along the fingers is that one
-SHORTFALL_COSINE = np.cos(np.deg2rad(20.0))   # a push's missed reach counts for pushes within this of its direction
-# A blind translation push that turned the object more than this lost reach to the turn (sim, plug pair 0: 8.3 mm
-# of 11.6 mm believed, turned 8 deg; counted as a missed reach, the next push that way still fell 1.5 mm short).
-PARTIAL_MISS_TURN = np.deg2rad(2.0)
-TURN_DRIFT = 0.01     # m the holder's grasp frame may wander while it turns (more: its wrist at a limit)
-DROPPED_SHARE = 0.75  # gripper 1's fingers closed below this share of the plan's narrowest grasp: nothing between them
-# Gripper 1's fingers forced this far [m] beyond the plan's widest grasp (and the opening the push began with) by the
-# loosened object: it is turning over in the grip. The finger width is felt blind too (sim, plug pushed blind along the
-# fingers: the fingers forced from 49.9 to 63.6 mm as it tilted 1 -> 21 deg in 6 s, the run lost at 14.9 deg).
-FORCED_OPEN = 0.002
-# A push stops (grip to the hold force, the rest planned from where the object is) once the object, seen for certain,
-# has tilted this share of `slip_angle` off the grasp axis since the push began; a pose past `slip_angle` is the SLIP
-# rule's (slip_poses of them in a row end the run; a lone one is a stray pose), not this one's
-# (sim, a stepped block pushed along its fingers: the tilt grew 0 -> 6.3 deg in 3.5 s of one push while tilt steering
-# slid the pusher 10 mm along the axis - SLIP at every alpha; with the arms 40 % slower the same push stopped at 5.2 deg,
-# and a level press took it back).
-PUSH_TILT_STOP = 2.0 / 3.0
-# A rotation's pusher turned this far, beyond the sweep that brings its tips onto the face, with the object not
-# turning 1 deg: it missed the face.
-MISSED_TURN = np.deg2rad(10.0)
-# A rotation's pusher sweeps round the grasp axis, its tips not along the push line: from touching the face's
-# push point, they must meet it again within this turn (more: the sweep runs along the face or past its edge).
-SWEEP_LIMIT = np.deg2rad(5.0)
-SWEEP_BACK = 0.001
-MISSED_NEAR = (0.005, np.cos(np.deg2rad(20.0)))   # m, cosine: a push this close to (and along) a missed one misses too
-TOUCHED = 0.0015      # m the grasp slides on the object (pose noise: 0.3 mm) that shows the pusher has met it
-HOLDER_MOVED = (0.01, np.deg2rad(10.0))   # m, rad: gripper 1 this far from where it started (pushes at alpha < 1) may go back
-# Vantage places a lost held object is looked for from: where the pusher started, turned this far round
-# the grasp axis (the way a rotation turns the object, and with it the faces its tags are on).
-LOOK_TURNS = np.deg2rad([0.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
-LOOK_PLACES = 3       # vantage places gone to (besides where the pusher stands) before the object counts as lost
-# A view the arm stopped this far short of (its wrist at a limit): at that place, views further from
-# where it got to are not tried (sim, bracket: five views 71-89 deg beyond reach, 4 s each, none seen).
-VIEW_SHORT = np.deg2rad(20.0)
-SAME_PLACE = 0.01     # m: a vantage place this close to where the pusher stands is that place
-# After the plan, a grasp outside the goal's angle tolerance with its axis tilted more than `level_tilt` off the
-# goal's is pressed back about an axis across it (the object rolling on gripper 1's fingertips, the grip held),
-# down to LEVEL_DONE, by a push along the grasp axis on a face LEVEL_LEVERS beside the grasp's middle (probe: the
-# bracket sagged 12.2 deg at a 15 N grip, a 3 N press 35 mm out -> 6.4 deg; released it stayed). A press that gained
-# less than LEVEL_DONE is not repeated (a grip it cannot roll the object in). LEVEL_PUSHES presses, and one more
-# where the tilt left is more than SETTLED_SHARE of the goal's angle tolerance (sim, bracket pair 1 at alpha 0: two
-# presses turned it about axes 40-60 deg off the tilt's, 4.1 -> 2.9 deg, a correction after them took it to 3.5;
-# a third for any tilt seen above level_tilt cost two turns of gripper 1 for 0.6 -> 0.5 deg, or none at all when
-# the turned view saw it level).
-LEVEL_DONE = np.deg2rad(0.5)
-# A press's tip meets the face up to LEVEL_SLACK after the pusher starts turning (the pose it was planned from
-# errs along the push; sim, bracket: the tips met it 1-1.5 mm past the gap), and goes PRESS_GIVE past it before
-# the object gives way (box, bracket: 0.9-1 mm).
-LEVEL_SLACK = 0.003
-PRESS_GIVE = 0.001
-LEVEL_PUSHES = 2
-# A press rolls the object on gripper 1's fingertips about the grasp's middle, which stays put; once the grasp has
-# slid this far on the object it shoves the object across them instead (sim: the plug at alpha 0, its face 5 mm
-# nearer than seen, shoved 5.6 mm while the gap closed, then SLIP).
-LEVEL_SLIDE = 0.002
-LEVEL_LEVERS = np.array([0.035, 0.025])
-LEVEL_OFF_AXIS = np.deg2rad([0.0, 30.0, -30.0])
-LEVEL_REACH_COSINE = np.cos(np.deg2rad(50.0))   # a press at most this far off the way the pusher's fingers point at home
-# A translation out of the grip towards the fingertips is pushed on the object's palm side, where gripper 1's fingers
-# are: the pusher's fingertips open either side of them (a straddle push), each this far [m] beyond touching them
-# (tip against finger, across the fingers; the nearest that fits first: one tip meeting the face late turns the object
-# less the nearer it is), the line between them at most STRADDLE_TWIST from across the fingers (an object turned in
-# the grip: the tips are lined up with it), the pusher's fingers along gripper 1's grasp axis, at most
-# STRADDLE_FINGERS off.
-STRADDLE_MARGINS = np.array([0.004, 0.012, 0.024])
-STRADDLE_TWIST = np.deg2rad(15.0)
-STRADDLE_FINGERS = np.cos(np.deg2rad(30.0))
-VIEW_POSES = 4        # a look for a certain pose averages the poses from at most this many of its last views
-FRUITLESS_NEAR = 0.02   # m: a place this close to one a look saw nothing from counts as that one (vantage places are 5 cm or more apart)
-
 
 @dataclass
 class _Push:
@@ -255,13 +165,13 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
 
 
-def _distinct(orientations: np.ndarray, chosen: np.ndarray) -> list[np.ndarray]:
-    """Up to OTHER_VIEWS of `orientations` (best first), each DISTINCT_VIEW from `chosen` and the others taken."""
+def _distinct(orientations: np.ndarray, chosen: np.ndarray, count: int, apart: float) -> list[np.ndarray]:
+    """Up to `count` of `orientations` (best first), each at least `apart` [rad] from `chosen` and the others taken."""
     taken = [chosen]
     for orientation in orientations:
-        if len(taken) > OTHER_VIEWS:
+        if len(taken) > count:
             break
-        if all(turn_between(orientation, other) >= DISTINCT_VIEW for other in taken):
+        if all(turn_between(orientation, other) >= apart for other in taken):
             taken.append(orientation)
     return taken[1:]
 
@@ -385,7 +295,7 @@ class PlanExecutor:
     # --- the state machine ---------------------------------------------------------------------
     def _tick(self, obs: Observation) -> Command:
         s = self.settings
-        if obs.opening < DROPPED_SHARE * self.narrowest_grasp:
+        if obs.opening < s.monitors.dropped_share * self.narrowest_grasp:
             return self._abort(Outcome.OBJECT_LOST, f"the object left gripper 1 during {self.step.name} of primitive "
                                f"{self.index}: its fingers closed to {obs.opening * 1000:.1f} mm (the plan's narrowest "
                                f"grasp is {self.narrowest_grasp * 1000:.1f} mm); stopped")
@@ -626,7 +536,8 @@ class PlanExecutor:
         started, find a push for `primitive` with the holder back where it started, holding the object
         as it does now (or with the holder then turning the object's far side towards it)?"""
         offset, turned = distance(self.holder_start, obs.holder)
-        if not self.may_return or self.far_side or (offset < HOLDER_MOVED[0] and turned < HOLDER_MOVED[1]):
+        moved = self.settings.holder
+        if not self.may_return or self.far_side or (offset < moved.moved_distance and turned < moved.moved_turn):
             return False
         returned = replace(obs, holder=self.holder_start.copy(), pusher=self.pusher_home.copy())
         try:
@@ -721,15 +632,16 @@ class PlanExecutor:
         turn.turned += float(Rotation.from_matrix(turn.last.T @ current).as_rotvec()[2])
         turn.last = current.copy()
         left = turn.angle - turn.turned
-        if abs(left) < WAYPOINT_TURN_TOLERANCE:
+        if abs(left) < self.settings.approach.waypoint_turn_tolerance:
             self.holder_turn, self.far_side, self.reckoned_time = None, not turn.back, obs.time
             self._enter(Step.FIND_CONTACT, obs)
             return Command()
-        if abs(turn.turned - turn.progress[0]) > HEADWAY[1]:
+        if abs(turn.turned - turn.progress[0]) > self.settings.approach.headway_turn:
             turn.progress = (turn.turned, obs.time)
         drift = float(np.linalg.norm(obs.holder[:3, 3] - turn.place))
-        if obs.time - turn.progress[1] > s.stall_time or drift > TURN_DRIFT:
-            why = f"moved {drift * 1000:.0f} mm" if drift > TURN_DRIFT else f"stopped at {np.rad2deg(turn.turned):.0f} deg"
+        if obs.time - turn.progress[1] > s.stall_time or drift > self.settings.monitors.turn_drift:
+            why = (f"moved {drift * 1000:.0f} mm" if drift > self.settings.monitors.turn_drift
+                   else f"stopped at {np.rad2deg(turn.turned):.0f} deg")
             if turn.back:
                 return self._abort(Outcome.LIMIT_VIOLATION, f"the holding gripper could not turn the object back ({why})")
             self.notes.append(f"the holding gripper could not turn the object ({why}): turned back, not turned again")
@@ -746,12 +658,13 @@ class PlanExecutor:
         offset = turn.home[:3, 3] - obs.holder[:3, 3]
         rotation = Rotation.from_matrix(turn.home[:3, :3] @ obs.holder[:3, :3].T).as_rotvec()
         distance_left, angle_left = float(np.linalg.norm(offset)), float(np.linalg.norm(rotation))
-        if distance_left < s.waypoint_tolerance and angle_left < WAYPOINT_TURN_TOLERANCE:
+        if distance_left < s.waypoint_tolerance and angle_left < self.settings.approach.waypoint_turn_tolerance:
             self.holder_turn, self.reckoned_time = None, obs.time
             self._enter(Step.FIND_CONTACT, obs)
             return Command()
-        left = distance_left + angle_left * HEADWAY[0] / HEADWAY[1]     # headway in either counts
-        if left < turn.progress[0] - HEADWAY[0]:
+        headway = self.settings.approach
+        left = distance_left + angle_left * headway.headway_distance / headway.headway_turn     # headway in either counts
+        if left < turn.progress[0] - self.settings.approach.headway_distance:
             turn.progress = (left, obs.time)
         if obs.time - turn.progress[1] > s.stall_time:
             self.notes.append(f"the holding gripper stopped {distance_left * 1000:.0f} mm and "
@@ -765,7 +678,7 @@ class PlanExecutor:
     def _add_correction(self, obs: Observation, failed: PrimitiveKind | None = None) -> None:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,
         a push also turns it): one more translation or rotation to the goal grasp, the larger error
-        first (not the kind that just found no push), up to MAX_CORRECTIONS besides a level press (see
+        first (not the kind that just found no push), up to `campaign.max_corrections` besides a level press (see
         `level_tilt`) comes first where the tilt is more than the turn about the grasp axis left (the
         holder's turns for it shift the object, which the corrections after it take back), else last."""
         s = self.settings
@@ -777,7 +690,7 @@ class PlanExecutor:
         shares.pop(failed, None)
         kind = max(shares, key=shares.get)
         corrections = len(self.primitives) - self.plan_length - (self.level_index is not None)
-        corrected = self.settled or shares[kind] <= RETRY_FACTOR or corrections >= MAX_CORRECTIONS
+        corrected = self.settled or shares[kind] <= s.campaign.retry_factor or corrections >= s.campaign.max_corrections
         tilt = float(np.linalg.norm(self._tilt_off_goal(obs.object_in_holder))) if self._needs_leveling(obs) else 0.0
         if tilt and (corrected or tilt > abs(self.errors[1])):
             self.level_index, self.level_began = len(self.primitives), tilt
@@ -793,10 +706,12 @@ class PlanExecutor:
         error, tolerance = self._error_and_tolerance(obs)
         if self._leveling:
             gained = self.level_began - error
-            return (error <= tolerance or self.pushes >= LEVEL_PUSHES + 1 or (self.pushes > 0 and gained < LEVEL_DONE)
-                    or (self.pushes >= LEVEL_PUSHES and error <= SETTLED_SHARE * self.settings.goal_angle_tolerance))
-        return (error <= tolerance or (self.pushes > 0 and error <= RETRY_FACTOR * tolerance)
-                or self.pushes >= MAX_PUSHES_PER_PRIMITIVE or self._settled(obs, error, tolerance))
+            level, settled = self.settings.level, self.settings.campaign.settled_share * self.settings.goal_angle_tolerance
+            return (error <= tolerance or self.pushes >= level.pushes + 1 or (self.pushes > 0 and gained < level.done)
+                    or (self.pushes >= level.pushes and error <= settled))
+        return (error <= tolerance or (self.pushes > 0 and error <= self.settings.campaign.retry_factor * tolerance)
+                or self.pushes >= self.settings.campaign.max_pushes_per_primitive
+                or self._settled(obs, error, tolerance))
 
     def _error_and_tolerance(self, obs: Observation) -> tuple[float, float]:
         """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation
@@ -810,18 +725,19 @@ class PlanExecutor:
         return abs(self.errors[1]), self.settings.angle_tolerance
 
     def _settled(self, obs: Observation, error: float, tolerance: float) -> bool:
-        """Did the last push of a primitive that ends at the goal grasp make no headway (NO_HEADWAY),
-        with the grasp already within SETTLED_SHARE of the goal's tolerances? Then more pushes like it
+        """Did the last push of a primitive that ends at the goal grasp make no headway (`campaign.no_headway`),
+        with the grasp already within `campaign.settled_share` of the goal's tolerances? Then more pushes like it
         would spend the time, not improve the grasp (sim, box: eight 13 s translation pushes from
         1.9-2.8 mm off moved it 0.0-0.6 mm each, until the run's time was nearly up); no correction
         follows."""
         headway = self.error_before_push - error
-        if self.pushes == 0 or self.index < self.plan_length - 1 or headway >= NO_HEADWAY * tolerance:
+        if (self.pushes == 0 or self.index < self.plan_length - 1
+                or headway >= self.settings.campaign.no_headway * tolerance):
             return False
         s = self.settings
         position, angle = self.final_errors(obs)
-        self.settled = (position <= SETTLED_SHARE * s.goal_position_tolerance
-                        and angle <= SETTLED_SHARE * s.goal_angle_tolerance)
+        self.settled = (position <= s.campaign.settled_share * s.goal_position_tolerance
+                        and angle <= s.campaign.settled_share * s.goal_angle_tolerance)
         if self.settled:
             self.notes.append(f"primitive {self.index} settled {position * 1000:.1f} mm and {np.rad2deg(angle):.1f} deg "
                               f"from the goal: its last push made no headway")
@@ -838,7 +754,7 @@ class PlanExecutor:
         if primitive.kind == PrimitiveKind.TRANSLATION:
             # Square onto a face round the grasp axis, along the normal line through the grasp's middle
             # (the contact force is along the face's normal: off that line it would turn the object),
-            # up to DETOUR_LIMIT off the remaining motion (holder frame): such a push goes as far as the
+            # up to `push.detour_limit` off the remaining motion (holder frame): such a push goes as far as the
             # motion's share along it, the next one takes the rest. Where no face is square to any
             # such line (a curved object), along the motion itself.
             motion = self._remaining_motion(obs)
@@ -870,11 +786,11 @@ class PlanExecutor:
         # it back towards the palm.)
         paper = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
         problems = []
-        for height in (0.0, *OFF_MIDDLE_SHARES * obs.opening / 2):
+        for height in (0.0, *s.push.off_middle_shares * obs.opening / 2):
             if height and not self.surface.inside(_on_grasp_axis(holder_in_object, height)[None])[0]:
                 continue     # (the axis crosses a hollow there)
             faces = self._face_pushes(obs, holder_in_object, height)
-            faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(SAME_PUSH)]
+            faces = faces[np.abs(faces @ paper.T).max(axis=1) < np.cos(s.push.same_push)]
             for directions in (paper, faces):
                 pushes = self._rotation_pushes(obs, directions, limited, problems, height)
                 try:
@@ -892,12 +808,13 @@ class PlanExecutor:
         without meeting gripper 1's palm."""
         s = self.settings
         middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
-        halves = 2 * s.tip_radius + STRADDLE_MARGINS
+        halves = 2 * s.tip_radius + s.straddle.margins
         halves = halves[2 * halves - 2 * s.tip_radius <= s.straddle_opening + 1e-9]
         if not len(halves):
-            raise PushError(f"a straddle push needs the pusher open {2 * (s.tip_radius + STRADDLE_MARGINS[0]) * 1000:.0f} mm "
+            widest = 2 * (s.tip_radius + s.straddle.margins[0])
+            raise PushError(f"a straddle push needs the pusher open {widest * 1000:.0f} mm "
                             f"(straddle_opening {s.straddle_opening * 1000:.0f} mm)")
-        push = straddle_push(self.surface, middle, rotation[:, 2], rotation[:, 1], halves, STRADDLE_TWIST)
+        push = straddle_push(self.surface, middle, rotation[:, 2], rotation[:, 1], halves, s.straddle.twist)
         depth = -float((push.point - middle) @ rotation[:, 2])     # towards the palm from the grasp's middle
         room = s.finger_length - 2 * s.tip_radius - s.gap - s.clearance   # (its finger beside the tip, radius tip_radius)
         if depth > room:
@@ -916,7 +833,7 @@ class PlanExecutor:
         holder_in_object = invert(obs.object_in_holder)
         middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
         pushes, problems = [], []
-        for depth, off, along in itertools.product(LEVEL_LEVERS, LEVEL_OFF_AXIS, (1.0, -1.0)):
+        for depth, off, along in itertools.product(s.level.levers, s.level.off_axis, (1.0, -1.0)):
             # (an axis turned `off` about the grasp axis: most of the turn, a little across it, the next push's)
             axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(self.level_axis)
             try:
@@ -933,13 +850,13 @@ class PlanExecutor:
         if not pushes:
             raise PushError("no level push: " + "; ".join(problems))
         candidates = self._watched(obs, pushes, occluders)
-        if not self.settings.blind_pushes:
+        if not s.blind_pushes:
             candidates = [c for c in candidates if c[1] > 0]
         if not candidates:
             raise PushError("the wrist camera would see none of the object's tags from where a level push starts")
         # The pusher's fingers point along the press: only a press the way they point at its start is reachable.
         reach = self.pusher_home[:3, 2]
-        candidates = [c for c in candidates if float(c[0].direction @ reach) > LEVEL_REACH_COSINE]
+        candidates = [c for c in candidates if float(c[0].direction @ reach) > np.cos(s.level.reach_cone)]
         if not candidates:
             raise PushError("no level push runs the way the pusher's fingers point where it started")
         return _best_level_press(candidates, middle, rotation @ self.level_axis, reach)
@@ -957,7 +874,7 @@ class PlanExecutor:
         palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
         ranked = []
         for along_fingers, direction in zip(directions[:, 2] < -np.cos(np.pi / 4), directions @ holder_in_object[:3, :3].T):
-            for depth in s.push_depth * LEVER_SHARES:
+            for depth in s.push_depth * s.push.lever_shares:
                 try:
                     push = rotation_push(self.surface, middle, holder_in_object[:3, 0], direction, -angle,
                                          depth, 0.0, s.edge_margin)
@@ -978,20 +895,22 @@ class PlanExecutor:
         return [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
 
     def _square_pushes(self, obs: Observation, motion: np.ndarray, holder_in_object: np.ndarray) -> list[np.ndarray]:
-        """Directions (holder frame) square onto the faces round the grasp within DETOUR_LIMIT of `motion`
+        """Directions (holder frame) square onto the faces round the grasp within `push.detour_limit` of `motion`
         and moving the object more than the tolerance along it: pushing along one slides the object
         without turning it."""
         pushes = self._face_pushes(obs, holder_in_object)
         # ... and one that would move the object less than the tolerance along the motion is no push.
         share = pushes @ motion
-        wanted = (share >= np.cos(DETOUR_LIMIT) * float(np.linalg.norm(motion))) & (share > self.settings.position_tolerance)
+        wanted = ((share >= np.cos(self.settings.push.detour_limit) * float(np.linalg.norm(motion)))
+                  & (share > self.settings.position_tolerance))
         return list(pushes[wanted])
 
     def _face_pushes(self, obs: Observation, holder_in_object: np.ndarray, height: float = 0.0) -> np.ndarray:
         """(k, 3) unit directions (holder frame, across the grasp axis) square onto the object's faces
         round the grasp axis `height` [m] along it from the grasp's middle, one per face."""
-        angles = np.linspace(0.0, 2 * np.pi, FACE_RAYS, endpoint=False)
-        rays = np.column_stack([np.zeros(FACE_RAYS), np.cos(angles), np.sin(angles)])     # holder frame
+        count = self.settings.push.face_rays
+        angles = np.linspace(0.0, 2 * np.pi, count, endpoint=False)
+        rays = np.column_stack([np.zeros(count), np.cos(angles), np.sin(angles)])     # holder frame
         normals = exit_normals(self.surface, _on_grasp_axis(holder_in_object, height), rays @ holder_in_object[:3, :3].T)
         pushes = -(normals[np.isfinite(normals).all(axis=1)] @ obs.object_in_holder[:3, :3].T)
         pushes[:, 0] = 0.0     # the face's tilt towards the grasp axis the fingers take
@@ -1003,7 +922,8 @@ class PlanExecutor:
         """Routes for the push points that can be reached and that the camera sees from the push start."""
         if self.unreachable:
             directions = np.array([(obs.holder @ obs.object_in_holder)[:3, :3] @ push.direction for push in pushes])
-            near = (directions @ np.array(self.unreachable).T >= np.cos(UNREACHABLE_CONE)).any(axis=1)
+            cone = np.cos(self.settings.campaign.unreachable_cone)
+            near = (directions @ np.array(self.unreachable).T >= cone).any(axis=1)
             if near.all():
                 raise PushError("the pusher could not get to where any push that would do it starts")
             pushes = [push for push, excluded in zip(pushes, near) if not excluded]
@@ -1021,7 +941,7 @@ class PlanExecutor:
         # A translation is pushed on dead reckoning and looked at after; a rotation is not: unseen, nothing
         # tells that its pusher slid off, shoves the object across the fingers or turns in the air (sim:
         # the plug's blind far-side rotations dropped it in 4 of 6 runs).
-        # (A level press unseen turns no further than the tilt it began with and the give, PRESS_GIVE.)
+        # (A level press unseen turns no further than the tilt it began with and the give, `level.press_give`.)
         if not watched and self.settings.blind_pushes and (self._primitive.kind == PrimitiveKind.TRANSLATION
                                                            or self._leveling):
             return candidates
@@ -1043,7 +963,8 @@ class PlanExecutor:
         direction_h = to_holder[:3, :3] @ direction
         # Where the last stretch begins: a push comes in along its line; a straddle push along the pusher's
         # fingers, known once its orientation is (below).
-        outside_h = None if push.spread else point_h - (box.exit_distance(point_h, -direction_h) + EXIT_MARGIN) * direction_h
+        outside_h = (None if push.spread
+                     else point_h - (box.exit_distance(point_h, -direction_h) + s.approach.exit_margin) * direction_h)
         if outside_h is not None and outside_h[2] < box.low[2]:
             # The line leaves the kept-free space through its palm end: the pusher would come up along
             # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
@@ -1072,9 +993,9 @@ class PlanExecutor:
             if clash or self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius,
                                                                                       push.spread))).any():
                 continue
-            near = from_rotation(view, start + (s.gap - SWEEP_BACK) * direction)
+            near = from_rotation(view, start + (s.gap - s.fingertips.sweep_back) * direction)
             if sweeping and not np.isfinite(sweep_to_touch(self.surface, object_pose, near, holder, direction,
-                                                           s.tip_radius, SWEEP_LIMIT)):
+                                                           s.tip_radius, s.fingertips.sweep_limit)):
                 sweeps += 1
                 continue
             break
@@ -1098,20 +1019,21 @@ class PlanExecutor:
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
-                     _distinct(views[1:][seen[1:] > 0], views[0]), blind=self.turns is not None and seen[0] == 0), int(seen[0])
+                     _distinct(views[1:][seen[1:] > 0], views[0], s.approach.other_views,
+                                   s.approach.distinct_view), blind=self.turns is not None and seen[0] == 0), int(seen[0])
 
     def _straddling_views(self, obs: Observation, place: np.ndarray, direction: np.ndarray,
                           occluders: Occluders) -> tuple[np.ndarray, np.ndarray]:
         """The pusher orientations (best view first) at `place` (base frame) whose fingertips, opened, straddle
         gripper 1's fingers for a push along `direction` (base frame): the fingers along the grasp axis (either
         way), the tips spread across it and the push - rolled about the fingers from the nearest views the arm
-        can take (STRADDLE_TWIST at most) onto exactly that line."""
+        can take (`straddle.twist` at most) onto exactly that line."""
         views, seen = self._views(obs, place, occluders=occluders)
         grasp_axis = obs.holder[:3, 0]
         spread = np.cross(direction, grasp_axis)
         spread /= np.linalg.norm(spread)
-        keep = ((np.abs(views[:, :, 0] @ spread) > np.cos(STRADDLE_TWIST))
-                & (np.abs(views[:, :, 2] @ grasp_axis) > STRADDLE_FINGERS))
+        keep = ((np.abs(views[:, :, 0] @ spread) > np.cos(self.settings.straddle.twist))
+                & (np.abs(views[:, :, 2] @ grasp_axis) > np.cos(self.settings.straddle.fingers)))
         if not keep.any():
             raise RouteError("no pusher orientation its arm can take puts its fingers along gripper 1's grasp axis "
                              "with the tips either side of gripper 1's fingers")
@@ -1128,7 +1050,7 @@ class PlanExecutor:
         clear of the object all the way (RouteError if not)."""
         s = self.settings
         fingers = orientation_h[:, 2]
-        length = box.exit_distance(start_h, -fingers) + EXIT_MARGIN
+        length = box.exit_distance(start_h, -fingers) + s.approach.exit_margin
         shells = fingertip_shells(orientation_h, s.tip_radius, spread)
         along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
         if self.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
@@ -1229,8 +1151,8 @@ class PlanExecutor:
         it stands through its best view and the others that see a tag, each for `stale_after` (seeking a
         certain pose: until a pose seen from it arrives); then
         go to the vantage places round the grasp axis the most tags are seen from
-        (`_vantage_places`), up to LOOK_PLACES, and do the same at each. A view the arm stops more
-        than VIEW_SHORT short of drops the place's views further than that from where it got to.
+        (`_vantage_places`), up to `look.places`, and do the same at each. A view the arm stops more
+        than `approach.view_short` short of drops the place's views further than that from where it got to.
         Seen from none, the run ends OBJECT_LOST with the grip closed. The search is bounded by its
         places and views (each given up when the arm stops turning towards it), not by how long the
         object goes unseen; the step's time limit counts afresh at each view and each place (it
@@ -1253,7 +1175,8 @@ class PlanExecutor:
             return self._next_look_place(obs)
         command = self._go_to(obs, look.place, look.views[0])
         short = turn_between(look.views[0], obs.pusher[:3, :3])
-        if short < WAYPOINT_TURN_TOLERANCE or self._stalled(obs, look.place, look.views[0]):   # (as far as the arm turns)
+        # (as far as the arm turns)
+        if short < self.settings.approach.waypoint_turn_tolerance or self._stalled(obs, look.place, look.views[0]):
             if look.since is None:
                 look.since = obs.time
             elif obs.time - look.since > self.settings.stale_after or (self.seeking_certain and self._seen_since(look.since)):
@@ -1262,10 +1185,10 @@ class PlanExecutor:
                     return command
                 look.views.pop(0)
                 look.since, self.step_started = None, obs.time
-                if short > VIEW_SHORT:
+                if short > self.settings.approach.view_short:
                     # The wrist is at a limit here: only views near where it got to are tried.
                     look.views = [view for view in look.views
-                                  if turn_between(view, obs.pusher[:3, :3]) <= VIEW_SHORT]
+                                  if turn_between(view, obs.pusher[:3, :3]) <= self.settings.approach.view_short]
         return command
 
     def _seen_since(self, since: float) -> bool:
@@ -1275,14 +1198,15 @@ class PlanExecutor:
 
     def _certain_from_views(self, look: _Look) -> bool:
         """Looking for a certain pose: take the pose seen from this view since the pusher got there; once the
-        mean of those from the last VIEW_POSES views is certain of its position (independent errors:
+        mean of those from the last `look.view_poses` views is certain of its position (independent errors:
         sigma / sqrt(n)), hold it and end the look (sim, plug: every view of 15 at three places gave
         1.0-1.3 mm against a 1 mm limit, 38 s of looking for nothing better)."""
         seen = self.last
         if not self._seen_since(look.since):
             return False
         look.poses.append((seen.object_in_holder.copy(), seen.object_position_sigma))
-        taken = look.poses[-VIEW_POSES:]     # (views from one place see much alike: no more than a few count)
+        # (views from one place see much alike: no more than a few count)
+        taken = look.poses[-self.settings.look.view_poses:]
         poses = np.array([pose for pose, _ in taken])
         sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
         if len(poses) < 2 or sigma > self.settings.slip_position_sigma:
@@ -1298,7 +1222,8 @@ class PlanExecutor:
         seen from, best first (the best is tried even if the model sees no tag from it)."""
         views, seen = self._views(obs, place, occluders=Occluders.of(self.shape, obs.holder, obs.opening),
                                   neutral=neutral)
-        return [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0])
+        return [views[0]] + _distinct(views[1:][seen[1:] > 0], views[0], self.settings.approach.other_views,
+                                   self.settings.approach.distinct_view)
 
     def _next_look_place(self, obs: Observation) -> Command:
         """On to the next vantage place the pusher can be routed to; after the last, OBJECT_LOST (or, looking
@@ -1308,7 +1233,7 @@ class PlanExecutor:
             self.fruitless.append(apply(invert(obs.holder), look.place))
         if look.places is None:
             look.places = self._vantage_places(obs)
-        while look.places and look.gone_to < LOOK_PLACES:
+        while look.places and look.gone_to < self.settings.look.places:
             place, orientation = look.places.pop(0)
             try:
                 self._route_to(obs, apply(invert(obs.holder), place), orientation)
@@ -1329,7 +1254,7 @@ class PlanExecutor:
                            "the hold force")
 
     def _vantage_places(self, obs: Observation) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Where the pusher started, turned LOOK_TURNS round the holder's grasp axis (its x, through the
+        """Where the pusher started, turned `look.turns` round the holder's grasp axis (its x, through the
         grasp's middle: what a rotation turns the object about) with the pusher's orientation turned
         alike, each moved just clear of the space kept free if inside it (as the object turned in the
         grip, that space grew): those within the workspace's limits that the view model sees a tag
@@ -1340,10 +1265,10 @@ class PlanExecutor:
         occluders = Occluders.of(self.shape, obs.holder, obs.opening)
         home, axes = self._home_in(obs.holder), obs.holder[:3, :3]
         found, taken = [], [obs.pusher[:3, 3]]     # (places this close to one taken are that one)
-        for angle in LOOK_TURNS:
+        for angle in s.look.turns:
             turn = Rotation.from_rotvec([angle, 0.0, 0.0]).as_matrix()
             place = apply(obs.holder, box.nearest_outside(turn @ home))
-            if (np.linalg.norm(np.array(taken) - place, axis=1).min() < SAME_PLACE
+            if (np.linalg.norm(np.array(taken) - place, axis=1).min() < s.look.same_place
                     or np.any(place < s.workspace_min) or np.any(place > s.workspace_max)):
                 continue
             away = float(np.linalg.norm(place - obs.pusher[:3, 3]))
@@ -1383,7 +1308,7 @@ class PlanExecutor:
         place sees much as it was (sim, bracket: four looks of one run each began at the same two
         blind places, 13 s each, before the third place saw a tag)."""
         here = apply(invert(obs.holder), place)
-        return any(np.linalg.norm(here - old) < FRUITLESS_NEAR for old in self.fruitless)
+        return any(np.linalg.norm(here - old) < self.settings.look.fruitless_near for old in self.fruitless)
 
     def _look_again(self, obs: Observation) -> Command | None:
         """Wait at the push start for a fresh pose; when none comes within `stale_after`, turn the
@@ -1436,12 +1361,12 @@ class PlanExecutor:
             closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - self.pushed_from[:3, 3]) @ self.push.local_direction)
             short = s.touch_margin if primitive.kind == PrimitiveKind.TRANSLATION and not self._leveling else 0.0
             seen = self.reckoning.pose
-            met = _slid_since(self.pushed_reference, seen) > TOUCHED
+            met = _slid_since(self.pushed_reference, seen) > s.push.touched
             if self._leveling:     # or pressed back about the level axis (pose noise reaches 0.5 deg; the turn about
                 # the grasp axis, 1.4 deg between two poses of a still bracket, is none of the press's business)
-                met = met or self._level_left(self.pushed_reference) - self._level_left(seen) > TURN_GAIN
+                met = met or self._level_left(self.pushed_reference) - self._level_left(seen) > s.push.turn_gain
             else:
-                met = met or abs(_turned_since(self.pushed_reference, seen)) > TURN_GAIN
+                met = met or abs(_turned_since(self.pushed_reference, seen)) > s.push.turn_gain
             if closed < s.gap - short and not met:
                 command = self._coordinated(obs, np.concatenate([s.push_speed * self.push.direction, np.zeros(3)]))
                 command.holder_grip = self._held() if self._leveling else self._loosened(obs)
@@ -1449,7 +1374,7 @@ class PlanExecutor:
             self.phase = "push"
             if primitive.kind == PrimitiveKind.ROTATION and not self._leveling:
                 sweep = sweep_to_touch(self.surface, obs.holder @ seen, obs.pusher, obs.holder,
-                                       obs.holder[:3, :3] @ self.push.local_direction, s.tip_radius, 2 * MISSED_TURN)
+                                       obs.holder[:3, :3] @ self.push.local_direction, s.tip_radius, 2 * s.push.missed_turn)
                 self.sweep_to_face = sweep if np.isfinite(sweep) else 0.0
         if self.phase == "tighten":
             if obs.time < self.grip_until:
@@ -1461,11 +1386,12 @@ class PlanExecutor:
         if self._leveling:
             return self._press_level(obs)
         forced = obs.opening - max(self.pushed_opening, self.widest_grasp)
-        if forced > FORCED_OPEN:
+        if forced > s.monitors.forced_open:
             return self._stop_push(obs, f"the object forced gripper 1's fingers {forced * 1000:.1f} mm wider than its "
                                         "grasp (turning over in the grip)")
         tilted = tilt_since(self.pushed_reference, obs.object_in_holder) if self._fresh(obs) else 0.0
-        if PUSH_TILT_STOP * s.slip_angle < tilted <= s.slip_angle and obs.object_tilt_sigma <= s.slip_tilt_sigma:
+        if (s.monitors.push_tilt_stop * s.slip_angle < tilted <= s.slip_angle
+                and obs.object_tilt_sigma <= s.slip_tilt_sigma):
             return self._stop_push(obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(self._remaining_motion(obs) @ (holder[:3, :3].T @ self.push.direction))
@@ -1487,7 +1413,8 @@ class PlanExecutor:
                 return self._tighten(obs)
             pusher_turned = abs(_turned_since(self.pushed_from, invert(obs.holder) @ obs.pusher))
             stalled = self._turn_stalled(pusher_turned, turned)
-            if (stalled and abs(turned) < TURN_GAIN) or (self.turn_mark is None and pusher_turned > self.sweep_to_face + MISSED_TURN):
+            missed = self.turn_mark is None and pusher_turned > self.sweep_to_face + s.push.missed_turn
+            if (stalled and abs(turned) < s.push.turn_gain) or missed:
                 # No turn to show for it (a stall after a noise 'gain', or none at all): turning in the air.
                 self._mark_missed(f"a rotation push of primitive {self.index} missed the object (it turned "
                                   f"{np.rad2deg(turned):.1f} deg): not tried there again")
@@ -1511,18 +1438,18 @@ class PlanExecutor:
 
     def _press_level(self, obs: Observation) -> Command:
         """Turn the object about `level_axis` through the grasp's middle, the grip held, under P control on
-        the tilt left along that axis; stop when it is under LEVEL_DONE, or once the pusher has turned the
-        tilt the press began with and the slack its tip may meet the face late by (seen: LEVEL_SLACK, the
-        seen tilt stops it first; unseen: only the give before the object moves, PRESS_GIVE)."""
+        the tilt left along that axis; stop when it is under `level.done`, or once the pusher has turned the
+        tilt the press began with and the slack its tip may meet the face late by (seen: `level.slack`, the
+        seen tilt stops it first; unseen: only the give before the object moves, `level.press_give`)."""
         s = self.settings
         left, began = self._level_left(obs.object_in_holder), self._level_left(self.pushed_reference)
         pusher_turned = turn_between((invert(obs.holder) @ obs.pusher)[:3, :3], self.pushed_from[:3, :3])
         lever = max(self.push.lever, 1e-3)
-        slack = (PRESS_GIVE if self.reckoning.blind else LEVEL_SLACK) / lever
-        if left <= LEVEL_DONE or pusher_turned > began + slack:
+        slack = (s.level.press_give if self.reckoning.blind else s.level.slack) / lever
+        if left <= s.level.done or pusher_turned > began + slack:
             return self._tighten(obs)
         slid = _slid_since(self.pushed_reference, obs.object_in_holder)
-        if slid > LEVEL_SLIDE:
+        if slid > s.level.slide:
             self.notes.append(f"a level press of primitive {self.index} stopped: the grasp slid {slid * 1000:.1f} mm "
                               "on the object (shoved across the fingers, not rolled on them)")
             return self._tighten(obs)
@@ -1533,7 +1460,7 @@ class PlanExecutor:
 
     def _level_left(self, object_in_holder: np.ndarray) -> float:
         """rad of tilt off the goal's grasp axis that a press has still to turn back: along the way the object
-        is seen turning once it has turned TURN_GAIN since the press began (about the way it should), before
+        is seen turning once it has turned `push.turn_gain` since the press began (about the way it should), before
         that along `level_axis`.
         A press turns the object about an axis of its own (sim, bracket: pushed to turn it about an axis 30
         deg off the tilt's, it turned about one 43 deg off, and pressed on until the tilt along the tilt's
@@ -1542,16 +1469,16 @@ class PlanExecutor:
         tilt = self._tilt_off_goal(object_in_holder)
         turned = self._tilt_off_goal(self.pushed_reference) - tilt
         way = float(np.linalg.norm(turned))
-        seen_way = way > TURN_GAIN and float(turned @ self.level_axis) > 0.0
+        seen_way = way > self.settings.push.turn_gain and float(turned @ self.level_axis) > 0.0
         return float(tilt @ (turned / way if seen_way else self.level_axis))
 
     def _turn_stalled(self, pusher_turned: float, turned: float) -> bool:
-        """Has the pusher turned `turn_stall` on since the object last gained TURN_GAIN with it? Then it
+        """Has the pusher turned `turn_stall` on since the object last gained `push.turn_gain` with it? Then it
         no longer turns the object but shoves it out of the grip (sim: bracket and plug stuck at 31 deg
         - the pusher slid along the face into a corner - then 8-38 deg of tilt within 0.5 s). Counted
         from the object's first gain: the pusher takes up the contact's slack first. Both in rad, absolute."""
         mark = self.turn_mark
-        if abs(turned) >= (TURN_GAIN if mark is None else mark[1] + TURN_GAIN):
+        if abs(turned) >= (self.settings.push.turn_gain if mark is None else mark[1] + self.settings.push.turn_gain):
             self.turn_mark = (pusher_turned, abs(turned))
             return False
         return mark is not None and pusher_turned - mark[0] > self.settings.turn_stall
@@ -1563,7 +1490,7 @@ class PlanExecutor:
         self.notes.append(note)
 
     def _missed_before(self, push: PushPoint) -> bool:
-        near, aligned = MISSED_NEAR
+        near, aligned = (self.settings.push.missed_near_distance, np.cos(self.settings.push.missed_near))
         return any(np.linalg.norm(push.point - m.point) < near and float(push.direction @ m.direction) > aligned
                    for m in self.missed)
 
@@ -1610,9 +1537,10 @@ class PlanExecutor:
             if self._push_spread:
                 backed = pusher - self.settings.gap * local
                 fingers = to_holder[:3, :3] @ obs.pusher[:3, 2]
-                path = [backed, backed - (box.exit_distance(backed, -fingers) + EXIT_MARGIN) * fingers]
+                out = box.exit_distance(backed, -fingers) + self.settings.approach.exit_margin
+                path = [backed, backed - out * fingers]
             else:
-                path = [pusher - (box.exit_distance(pusher, -local) + EXIT_MARGIN) * local]
+                path = [pusher - (box.exit_distance(pusher, -local) + self.settings.approach.exit_margin) * local]
             self.retreat = [apply(obs.holder, point) for point in path]
         short = float(np.linalg.norm(self.retreat[0] - obs.pusher[:3, 3]))
         if short < self.settings.waypoint_tolerance or self._stalled(obs, self.retreat[0]):
@@ -1657,7 +1585,7 @@ class PlanExecutor:
         back = []
         along = self.push.local_direction if self.push is not None else np.zeros(3)
         if box.contains(start)[0] and np.any(along):
-            start = start - (box.exit_distance(start, -along) + EXIT_MARGIN) * along
+            start = start - (box.exit_distance(start, -along) + self.settings.approach.exit_margin) * along
             back = [apply(obs.holder, start)]
         places = back + [apply(obs.holder, w) for w in route(start, goal, box, goal)]
         orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [orientation]
@@ -1708,8 +1636,9 @@ class PlanExecutor:
         turn = 0.0 if orientation is None else turn_between(orientation, obs.pusher[:3, :3])
         key = target.tobytes() + (b"" if orientation is None else orientation.tobytes())
         headway = self.headway
-        if (headway is None or headway.target != key or offset < headway.offset - HEADWAY[0]
-                or turn < headway.turn - HEADWAY[1]):
+        gain = self.settings.approach
+        if (headway is None or headway.target != key or offset < headway.offset - gain.headway_distance
+                or turn < headway.turn - self.settings.approach.headway_turn):
             self.headway = _Headway(key, offset, turn, obs.time)
             return False
         return obs.time - headway.since > self.settings.stall_time
@@ -1720,7 +1649,7 @@ class PlanExecutor:
         turn = turn_between(self.push.orientations[self.waypoint], obs.pusher[:3, :3])
         # (where a push starts: on its line, precisely)
         tolerance = self.settings.waypoint_tolerance if self._on_the_way else self.settings.position_tolerance
-        return offset < tolerance and turn < WAYPOINT_TURN_TOLERANCE
+        return offset < tolerance and turn < self.settings.approach.waypoint_turn_tolerance
 
     @property
     def _on_the_way(self) -> bool:
@@ -1753,7 +1682,7 @@ class PlanExecutor:
         if orientation is not None:
             turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
             angular = _limited(s.approach_gain * turn, s.max_angular_speed,
-                               through and np.linalg.norm(turn) > WAYPOINT_TURN_TOLERANCE)
+                               through and np.linalg.norm(turn) > s.approach.waypoint_turn_tolerance)
         return Command(pusher=np.concatenate([velocity, angular]))
 
     def _loosened(self, obs: Observation) -> GripCommand:
@@ -1798,7 +1727,7 @@ class PlanExecutor:
         if self._primitive.kind == PrimitiveKind.ROTATION:
             believed = _turned_since(self.pushed_reference, self.reckoned)
             seen = _turned_since(self.pushed_reference, obs.object_in_holder)
-            if abs(believed) > 2 * TURN_GAIN and abs(seen) < TURN_GAIN:
+            if abs(believed) > 2 * self.settings.push.turn_gain and abs(seen) < self.settings.push.turn_gain:
                 self._mark_missed(f"a blind rotation push of primitive {self.index} did not turn the object (turned "
                                   f"{np.rad2deg(seen):.1f} deg, believed {np.rad2deg(believed):.1f} deg): not tried there again")
             return
@@ -1807,7 +1736,8 @@ class PlanExecutor:
         seen = float((obs.object_in_holder[:3, 3] - self.pushed_reference[:3, 3]) @ direction)
         tolerance = self.settings.position_tolerance
         reached = seen >= tolerance / 2
-        if reached and abs(_turned_since(self.pushed_reference, obs.object_in_holder)) > PARTIAL_MISS_TURN:
+        turned = abs(_turned_since(self.pushed_reference, obs.object_in_holder))
+        if reached and turned > self.settings.campaign.partial_miss_turn:
             return     # the push turned the object too: what it lost along the push is not where it met the face
         if believed > tolerance and abs(believed - seen) > tolerance / 2:
             self.shortfalls.append((direction.copy(), min(believed - seen, self.settings.gap)))
@@ -1819,7 +1749,8 @@ class PlanExecutor:
 
     def _shortfall(self, direction: np.ndarray) -> float:
         """How much further on than its pose says the object has been met by blind pushes this way (0 to `gap`)."""
-        extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= SHORTFALL_COSINE)
+        cone = np.cos(self.settings.campaign.shortfall_cone)
+        extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= cone)
         return float(np.clip(extra, 0.0, self.settings.gap))
 
     def _remaining_motion(self, obs: Observation) -> np.ndarray:

@@ -14,6 +14,132 @@ from dmg_common.config import parameter_defaults
 
 
 @dataclass(frozen=True)
+class CampaignSettings:
+    """How many pushes a primitive and the plan's end get, and when pushing stops (`campaign.*`)."""
+
+    max_pushes_per_primitive: int
+    max_corrections: int
+    retry_factor: float
+    no_headway: float
+    settled_share: float
+    unreachable_cone: float        # rad
+    shortfall_cone: float          # rad
+    partial_miss_turn: float       # rad
+
+
+@dataclass(frozen=True)
+class ApproachSettings:
+    """Getting the pusher to a push start (`approach.*`)."""
+
+    waypoint_turn_tolerance: float   # rad
+    exit_margin: float
+    headway_distance: float
+    headway_turn: float            # rad
+    other_views: int
+    distinct_view: float           # rad
+    view_short: float              # rad
+
+
+@dataclass(frozen=True)
+class PushSettings:
+    """Choosing and judging pushes (`push.*`)."""
+
+    lever_shares: np.ndarray
+    off_middle_shares: np.ndarray
+    face_rays: int
+    detour_limit: float            # rad
+    same_push: float               # rad
+    turn_gain: float               # rad
+    missed_turn: float             # rad
+    missed_near_distance: float
+    missed_near: float             # rad
+    touched: float
+
+
+@dataclass(frozen=True)
+class FingertipSettings:
+    """The pusher's fingertips sweeping onto a face (`fingertips.*`)."""
+
+    sweep_limit: float             # rad
+    sweep_back: float
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """Stops and faults read from the grip and the object's turn (`monitors.*`)."""
+
+    dropped_share: float
+    forced_open: float
+    push_tilt_stop: float
+    turn_drift: float
+
+
+@dataclass(frozen=True)
+class HolderSettings:
+    """When gripper 1 may go back to where it started (`holder.*`)."""
+
+    moved_distance: float
+    moved_turn: float              # rad
+
+
+@dataclass(frozen=True)
+class LookSettings:
+    """Looking for the object or for a certain pose of it (`look.*`)."""
+
+    turns: np.ndarray              # rad
+    places: int
+    same_place: float
+    view_poses: int
+    fruitless_near: float
+
+
+@dataclass(frozen=True)
+class LevelSettings:
+    """Pressing a tilted grasp level (`level.*`)."""
+
+    done: float                    # rad
+    slack: float
+    press_give: float
+    pushes: int
+    slide: float
+    levers: np.ndarray
+    off_axis: np.ndarray           # rad
+    reach_cone: float              # rad
+
+
+@dataclass(frozen=True)
+class StraddleSettings:
+    """Straddle pushes: the pusher's tips either side of gripper 1's fingers (`straddle.*`)."""
+
+    margins: np.ndarray
+    twist: float                   # rad
+    fingers: float                 # rad
+
+
+def _value(annotation: Any, name: str, values: dict[str, Any]) -> Any:
+    """values[name] (or values[name + "_deg"] in radians) as the field's type."""
+    degrees = name not in values
+    value = values[f"{name}_deg"] if degrees else values[name]
+    if annotation in (int, "int"):
+        return int(value)
+    if annotation in (bool, "bool"):
+        return bool(value)
+    array = np.asarray(value, float)
+    array = np.deg2rad(array) if degrees else array
+    return array if annotation in (np.ndarray, "np.ndarray") else float(array)
+
+
+def _group(group_class: type, prefix: str, values: dict[str, Any]) -> Any:
+    inner = {key[len(prefix) + 1:]: value for key, value in values.items() if key.startswith(prefix + ".")}
+    return group_class(**{f.name: _value(f.type, f.name, inner) for f in fields(group_class)})
+
+
+GROUPS = {"campaign": CampaignSettings, "approach": ApproachSettings, "push": PushSettings,
+          "fingertips": FingertipSettings, "monitors": MonitorSettings, "holder": HolderSettings,
+          "look": LookSettings, "level": LevelSettings, "straddle": StraddleSettings}
+
+
+@dataclass(frozen=True)
 class ExecutorSettings:
     linear_gain: float
     angular_gain: float
@@ -69,19 +195,28 @@ class ExecutorSettings:
     straddle_opening: float
     holder_turn: float             # rad
     level_tilt: float              # rad
+    campaign: CampaignSettings
+    approach: ApproachSettings
+    push: PushSettings
+    fingertips: FingertipSettings
+    monitors: MonitorSettings
+    holder: HolderSettings
+    look: LookSettings
+    level: LevelSettings
+    straddle: StraddleSettings
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":
-        """From parameter values named as in config/executor.yaml (angles there in degrees)."""
+        """From parameter values named as in config/executor.yaml (angles there in degrees; a group's
+        parameters are named `<group>.<field>`)."""
         converted = {}
         for field in fields(cls):
-            if field.name in values:
-                value = values[field.name]
+            if field.name in GROUPS:
+                converted[field.name] = _group(GROUPS[field.name], field.name, values)
+            elif field.name.startswith("workspace"):
+                converted[field.name] = np.asarray(values[field.name], float)
             else:
-                value = np.deg2rad(float(values[f"{field.name}_deg"]))
-            converted[field.name] = (np.asarray(value, float) if field.name.startswith("workspace")
-                                     else int(value) if field.type in (int, "int")
-                                     else bool(value) if field.type in (bool, "bool") else float(value))
+                converted[field.name] = _value(field.type, field.name, values)
         settings = cls(**converted)
         settings.validate()
         return settings

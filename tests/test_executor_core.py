@@ -653,7 +653,6 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
     seen again, the run ends OBJECT_LOST after the vantage places, the grip closed at the hold force."""
     from dmg_common.transforms import distance, invert
     from dmg_executor.contract import Outcome
-    from dmg_executor.controller import LOOK_PLACES
 
     cell, loop, _, _ = loop_parts
     for comes_back in (True, False):
@@ -674,7 +673,7 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
             outcome = executor.result
             assert outcome.outcome == Outcome.OBJECT_LOST, outcome.message
             assert "vantage place" in outcome.message and "gripper 1 closed" in outcome.message, outcome.message
-            assert 1 <= executor.looking.gone_to <= LOOK_PLACES
+            assert 1 <= executor.looking.gone_to <= executor.settings.look.places
             loop.apply(executor.update(loop.observe()))
             cell.run(0.5)
             assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
@@ -720,12 +719,12 @@ def test_places_a_look_saw_nothing_from_are_looked_from_last_in_the_runs_later_l
         executor.fruitless = kept
 
 
-def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface) -> tuple[float, int]:
+def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface, **overrides) -> tuple[float, int]:
     """The camera capped from mid-push and never uncapped; once the search begins the pusher's arm
     does not turn (its wrist at a limit). Returns the search's sim seconds until the run ended and
     how many views were given up on the way."""
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = _translation_executor(loop_parts, box_surface, **overrides)
     _half_a_second_into_the_push(loop, executor)
     began, given_up, views, place = None, 0, None, None
     while not executor.done and cell.time < 600.0:
@@ -744,16 +743,13 @@ def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface) -> tuple[fl
     return cell.time - began, given_up
 
 
-def test_views_a_wrist_at_its_limit_cannot_turn_to_are_not_tried_one_by_one(loop_parts, box_surface, monkeypatch):
-    """A view the arm stopped more than VIEW_SHORT short of shows its wrist at a limit there: the
+def test_views_a_wrist_at_its_limit_cannot_turn_to_are_not_tried_one_by_one(loop_parts, box_surface):
+    """A view the arm stopped more than `approach.view_short_deg` short of shows its wrist at a limit there: the
     place's other views that far from where it got to are dropped, not each waited for (sim,
     bracket: five views 71-89 deg beyond reach, 4 s each). With the rule the fruitless search gives
     up fewer views and ends sooner than without it."""
-    from dmg_executor import controller
-
     with_rule = _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface)
-    monkeypatch.setattr(controller, "VIEW_SHORT", np.pi)
-    without = _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface)
+    without = _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface, **{"approach.view_short_deg": 180.0})
     assert with_rule[1] < without[1] and with_rule[0] < without[0], (with_rule, without)
 
 
@@ -804,15 +800,14 @@ def _pushed_once(loop_parts, box_surface, length: float, headway: float, **overr
 def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, box_surface, headway, goal_tolerance,
                                                                    settles):
     """The box 2 mm from its goal, its one translation pushed once: a push that brought the error
-    down by less than NO_HEADWAY tolerances (0.25 mm here), with the grasp within SETTLED_SHARE of
+    down by less than `campaign.no_headway` tolerances (0.25 mm here), with the grasp within `campaign.settled_share` of
     the goal's tolerance, is the last - the run ends OK from where it is. With headway, or outside
     that share, the primitive is pushed again."""
     from dmg_executor.contract import Outcome
-    from dmg_executor.controller import SETTLED_SHARE
 
     executor, seen = _pushed_once(loop_parts, box_surface, 0.002, headway, position_tolerance=0.0005,
                                      goal_position_tolerance=goal_tolerance)
-    assert 0.0015 < seen < SETTLED_SHARE * 0.003, seen      # near the goal, not within twice position_tolerance
+    assert 0.0015 < seen < executor.settings.campaign.settled_share * 0.003, seen      # near the goal, not within twice position_tolerance
     settled = [note for note in executor.notes if "settled" in note]
     if settles:
         assert executor.done and executor.result.outcome == Outcome.OK, executor.result
@@ -976,7 +971,6 @@ def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(l
     the push is made (without the rule the push was given up, never again that way)."""
     from dmg_common.transforms import turn_between
     from dmg_executor.contract import Outcome
-    from dmg_executor.controller import WAYPOINT_TURN_TOLERANCE
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -997,7 +991,7 @@ def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(l
     outcome = executor.result
     assert outcome is not None and outcome.outcome == Outcome.OK, outcome
     assert "given up" not in outcome.message, outcome.message
-    assert passed_turned and max(passed_turned) > WAYPOINT_TURN_TOLERANCE, passed_turned   # passed unturned
+    assert passed_turned and max(passed_turned) > executor.settings.approach.waypoint_turn_tolerance, passed_turned   # passed unturned
 
 
 def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_home(loop_parts, box_surface):
@@ -1381,16 +1375,15 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
 def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_tolerance_is_tilt(
         loop_parts, box_surface, presses, tilt_deg, finished):
     """Level presses go on while the grasp axis is tilted more than `level_tilt_deg` off the goal's: a second
-    press always, a third only while the tilt is more than SETTLED_SHARE of the goal's angle tolerance (2.4 deg
+    press always, a third only while the tilt is more than `campaign.settled_share` of the goal's angle tolerance (2.4 deg
     of 3 here), and never a fourth."""
     from dataclasses import replace
 
     from dmg_common.transforms import invert
-    from dmg_executor.controller import LEVEL_PUSHES, SETTLED_SHARE
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface, length=0.005)
-    assert LEVEL_PUSHES == 2 and SETTLED_SHARE * executor.settings.goal_angle_tolerance == pytest.approx(np.deg2rad(2.4))
+    assert executor.settings.level.pushes == 2 and executor.settings.campaign.settled_share * executor.settings.goal_angle_tolerance == pytest.approx(np.deg2rad(2.4))
     executor.primitives.append(replace(executor.primitives[-1]))      # the level press after the plan
     executor.index = executor.level_index = len(executor.primitives) - 1
     executor.level_began, executor.pushes = np.deg2rad(tilt_deg + 1.0), presses
@@ -1805,20 +1798,21 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
 def test_a_rotation_pushers_sweep_meets_a_face_across_it_not_one_it_runs_along(box_surface):
     """A rotation's pusher turns about the grasp axis: its tips sweep round it. Beside the box's side
     face, 18 mm off the axis along it, the sweep runs into the face within a few degrees; over the top
-    face, straight above the axis, it runs along the face and comes no nearer within SWEEP_LIMIT (such
+    face, straight above the axis, it runs along the face and comes no nearer within `fingertips.sweep_limit_deg` (such
     a push is not planned; sim: eight pushes taken to have missed the stepped block)."""
     from dmg_common.transforms import from_rotation
-    from dmg_executor.controller import SWEEP_LIMIT
     from dmg_executor.fingertips import sweep_to_touch
+    from dmg_executor.settings import ExecutorSettings
 
+    sweep_limit = ExecutorSettings.defaults().fingertips.sweep_limit
     radius, holder, box_pose = 0.008, np.eye(4), np.eye(4)        # the grasp axis along x through the box's centre
     beside = from_rotation(np.eye(3), [0.0, 0.03 + radius + 0.001, 0.018])   # tips side by side along x, 1 mm off
-    turn = sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, -1.0, 0.0]), radius, SWEEP_LIMIT)
+    turn = sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, -1.0, 0.0]), radius, sweep_limit)
     assert np.deg2rad(0.5) <= turn <= np.deg2rad(3.0), np.rad2deg(turn)
     over = from_rotation(np.eye(3), [0.0, 0.0, 0.02 + radius + 0.001])
-    assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, SWEEP_LIMIT) == np.inf
+    assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, sweep_limit) == np.inf
     # Turned the other way the pusher sweeps away from the side face: the sense follows the push's direction.
-    assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, SWEEP_LIMIT) == np.inf
+    assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, sweep_limit) == np.inf
 
 
 def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_is_wide(loop_parts):
@@ -1863,11 +1857,11 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     """A pusher turning in the air (the face not where the push was planned) would turn on until the
     step's time limit, and the same push be planned again (sim: the plug's far side, five times).
     Here the camera shows the object not turning at all: the push stops once the pusher has turned
-    MISSED_TURN beyond the sweep that brings its tips onto the face, and the next push is planned elsewhere."""
+    `push.missed_turn_deg` beyond the sweep that brings its tips onto the face, and the next push is planned elsewhere."""
     from dataclasses import replace
 
     from dmg_common.transforms import invert
-    from dmg_executor.controller import MISSED_NEAR, MISSED_TURN, _turned_since
+    from dmg_executor.controller import _turned_since
 
     cell, loop, _, _ = loop_parts
     executor = _rotation_executor(loop_parts, box_surface)
@@ -1882,26 +1876,25 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
         cell.run(loop.control_period)
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("missed the object" in note for note in executor.notes), executor.notes
-    limit = MISSED_TURN + executor.sweep_to_face
+    limit = executor.settings.push.missed_turn + executor.sweep_to_face
     assert executor.sweep_to_face < np.deg2rad(5.0)
     assert limit < pusher_turned < limit + np.deg2rad(1.0), np.rad2deg([pusher_turned, executor.sweep_to_face])
     missed = executor.missed[0]
     while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
         _tick(loop, executor)
     following = executor.push.contact
-    assert following is not None and not (np.linalg.norm(following.point - missed.point) < MISSED_NEAR[0]
-                                          and following.direction @ missed.direction > MISSED_NEAR[1])
+    assert following is not None and not (np.linalg.norm(following.point - missed.point) < executor.settings.push.missed_near_distance
+                                          and following.direction @ missed.direction > np.cos(executor.settings.push.missed_near))
 
 
 @pytest.mark.parametrize("widened, stops", [(0.001, False), (0.003, True)])
 def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its_grasp(loop_parts, box_surface,
                                                                                         widened, stops):
     """The fingers' opening is felt even when the camera sees nothing: an object turning over in the
-    loosened grip spreads them. Reported FORCED_OPEN wider than the plan's widest grasp mid-push, the
+    loosened grip spreads them. Reported `monitors.forced_open` wider than the plan's widest grasp mid-push, the
     push stops within a tick (grip to the hold force, a note) and the run goes on; 1 mm wider, it does not."""
     from dataclasses import replace
 
-    from dmg_executor.controller import FORCED_OPEN
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1916,7 +1909,7 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
     assert (executor.phase == "tighten") is stops, (executor.phase, widest, observation.opening)
     noted = [note for note in executor.notes if "forced gripper 1's fingers" in note]
     if stops:
-        assert FORCED_OPEN < widened and command.holder_grip.max_force == executor.settings.hold_force
+        assert executor.settings.monitors.forced_open < widened and command.holder_grip.max_force == executor.settings.hold_force
         assert len(noted) == 1 and "3.0 mm wider" in noted[0], executor.notes
         assert not executor.done     # the run goes on
     else:
@@ -1925,13 +1918,12 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
 
 @pytest.mark.parametrize("tilt_deg, stops", [(4.5, True), (3.0, False), (8.0, False)])
 def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts, box_surface, tilt_deg, stops):
-    """A pushed object seen for certain tilted PUSH_TILT_STOP of `slip_angle_deg` (4 of 6 deg) off the grasp axis
+    """A pushed object seen for certain tilted `monitors.push_tilt_stop` of `slip_angle_deg` (4 of 6 deg) off the grasp axis
     since the push began stops the push within the tick (grip to the hold force, a note) and the run goes on,
     rather than pushing on into a SLIP; 3 deg, the push goes on; one pose past 6 deg is the SLIP rule's (a slip
     after `slip_poses` in a row, see the test above), the push goes on."""
     from dataclasses import replace
 
-    from dmg_executor.controller import PUSH_TILT_STOP
 
     cell, loop, _, _ = loop_parts
     executor = _translation_executor(loop_parts, box_surface)
@@ -1939,7 +1931,7 @@ def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts
     while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
         _tick(loop, executor)
     assert executor.phase == "push", (executor.step, executor.result)
-    assert np.rad2deg(PUSH_TILT_STOP * executor.settings.slip_angle) == pytest.approx(4.0)
+    assert np.rad2deg(executor.settings.monitors.push_tilt_stop * executor.settings.slip_angle) == pytest.approx(4.0)
     loop.perceive()
     observation = loop.observe()
     tilted = executor.pushed_reference.copy()      # turned about gripper 1's y, through the object's origin

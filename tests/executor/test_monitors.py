@@ -8,8 +8,14 @@ from scipy.spatial.transform import Rotation
 from dmg_common.transforms import from_rotation
 from dmg_executor.belief import HeldPose, PoseTrust
 from dmg_executor.contract import Observation
-from dmg_executor.monitors import (SlipStreak, limit_violation, moved_in_grip, poses_agree, tilt_since,
-                                   tilted_while_pushed)
+from dmg_executor.monitors import (
+    SlipStreak,
+    limit_violation,
+    moved_in_grip,
+    poses_agree,
+    tilt_since,
+    tilted_while_pushed,
+)
 from dmg_executor.settings import ExecutorSettings
 
 S = ExecutorSettings.defaults()
