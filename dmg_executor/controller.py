@@ -207,7 +207,8 @@ class PlanExecutor:
         self.widest_grasp = max((max(p.opening_before, p.opening_after) for p in primitives), default=0.0)
         self.notes: list[str] = []      # primitives that could not be finished, and why
         self.camera, self.tags = camera, tags
-        self.turns = turns(settings.tilt_limit, settings.roll_limit) if camera is not None and tags is not None else None
+        self.turns = (turns(settings.tilt_limit, settings.roll_limit, settings.views.grid_step)
+                      if camera is not None and tags is not None else None)
         self.shape = GripperShape(settings.finger_length, settings.tip_radius, settings.hand_start, settings.hand_end,
                                   settings.hand_radius)
         self.waiting_since: float | None = None     # at a push start, waiting for a fresh object pose
@@ -763,7 +764,8 @@ class PlanExecutor:
             pushes, problems = [], []
             for direction in directions:
                 try:   # the contact moves over the object opposite to the object's motion
-                    pushes.append(translation_push(self.surface, middle, -(holder_in_object[:3, :3] @ direction)))
+                    pushes.append(translation_push(self.surface, middle, -(holder_in_object[:3, :3] @ direction),
+                                                   self.settings.push.translation_slant))
                 except PushError as error:
                     problems.append(str(error))
             if motion[2] > s.position_tolerance and s.straddle_opening > 0.0:
@@ -814,7 +816,8 @@ class PlanExecutor:
             widest = 2 * (s.tip_radius + s.straddle.margins[0])
             raise PushError(f"a straddle push needs the pusher open {widest * 1000:.0f} mm "
                             f"(straddle_opening {s.straddle_opening * 1000:.0f} mm)")
-        push = straddle_push(self.surface, middle, rotation[:, 2], rotation[:, 1], halves, s.straddle.twist)
+        push = straddle_push(self.surface, middle, rotation[:, 2], rotation[:, 1], halves, s.straddle.twist,
+                             s.push.translation_slant)
         depth = -float((push.point - middle) @ rotation[:, 2])     # towards the palm from the grasp's middle
         room = s.finger_length - 2 * s.tip_radius - s.gap - s.clearance   # (its finger beside the tip, radius tip_radius)
         if depth > room:
@@ -838,7 +841,7 @@ class PlanExecutor:
             axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(self.level_axis)
             try:
                 push = rotation_push(self.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
-                                     -angle, depth, 0.0, s.edge_margin)
+                                     -angle, depth, 0.0, s.push.slant_limit, s.edge_margin)
             except PushError as error:
                 problems.append(str(error))
                 continue
@@ -877,7 +880,7 @@ class PlanExecutor:
             for depth in s.push_depth * s.push.lever_shares:
                 try:
                     push = rotation_push(self.surface, middle, holder_in_object[:3, 0], direction, -angle,
-                                         depth, 0.0, s.edge_margin)
+                                         depth, 0.0, s.push.slant_limit, s.edge_margin)
                 except PushError as error:
                     problems.append(str(error))
                     continue
@@ -987,15 +990,16 @@ class PlanExecutor:
         sweeping = self._primitive.kind == PrimitiveKind.ROTATION and not self._leveling
         clashes = sweeps = 0
         for first, view in enumerate(views):
-            start = push_start(point, normal, direction, view, s.tip_radius, s.gap, push.spread)
+            start = push_start(point, normal, direction, view, s.tip_radius, s.gap, s.fingertips, s.push.slant_limit,
+                               push.spread)
             clash = self._hands_clash(start, view, occluders)
             clashes += clash
-            if clash or self.surface.inside(apply(to_object, start + fingertip_shells(view, s.tip_radius,
-                                                                                      push.spread))).any():
+            shells = fingertip_shells(view, s.tip_radius, s.fingertips.tip_clearance, push.spread)
+            if clash or self.surface.inside(apply(to_object, start + shells)).any():
                 continue
             near = from_rotation(view, start + (s.gap - s.fingertips.sweep_back) * direction)
             if sweeping and not np.isfinite(sweep_to_touch(self.surface, object_pose, near, holder, direction,
-                                                           s.tip_radius, s.fingertips.sweep_limit)):
+                                                           s.tip_radius, s.fingertips.sweep_limit, s.fingertips)):
                 sweeps += 1
                 continue
             break
@@ -1010,12 +1014,13 @@ class PlanExecutor:
             raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would {what} "
                              "however it is turned")
         views, seen = views[first:], seen[first:]
-        start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap, push.spread)
+        start = meeting_start(start, views[0], direction, object_pose, self.surface, s.tip_radius, s.gap, s.fingertips,
+                              push.spread)
         if push.spread:
             outside_h = self._straddle_entry(apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
                                              invert(obs.object_in_holder))
         pusher_h = apply(to_holder, obs.pusher[:3, 3])
-        waypoints = [apply(holder, w) for w in route(pusher_h, outside_h, box, self._home_in(holder))]
+        waypoints = [apply(holder, w) for w in self._route(pusher_h, outside_h, box, self._home_in(holder))]
         lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
         orientations = [self._views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
         return _Push(direction, direction_h, start, waypoints + [start], orientations, lever, push,
@@ -1051,7 +1056,7 @@ class PlanExecutor:
         s = self.settings
         fingers = orientation_h[:, 2]
         length = box.exit_distance(start_h, -fingers) + s.approach.exit_margin
-        shells = fingertip_shells(orientation_h, s.tip_radius, spread)
+        shells = fingertip_shells(orientation_h, s.tip_radius, s.fingertips.tip_clearance, spread)
         along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
         if self.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
             raise RouteError(f"the straddle push's open fingertips would meet the object on their way in to "
@@ -1080,7 +1085,7 @@ class PlanExecutor:
             return neutral[None], np.zeros(1, int)
         scene = self.surface.scene if occluders is not None else None
         return ranked_views(self.camera, self.tags, obs.holder @ obs.object_in_holder, place, neutral, self.turns,
-                            level, occluders, scene, in_line)
+                            self.settings.views, level, occluders, scene, in_line)
 
     def _home_in(self, holder: np.ndarray) -> np.ndarray:
         """Where the pusher started (its camera's vantage point), in the holder's frame."""
@@ -1374,7 +1379,8 @@ class PlanExecutor:
             self.phase = "push"
             if primitive.kind == PrimitiveKind.ROTATION and not self._leveling:
                 sweep = sweep_to_touch(self.surface, obs.holder @ seen, obs.pusher, obs.holder,
-                                       obs.holder[:3, :3] @ self.push.local_direction, s.tip_radius, 2 * s.push.missed_turn)
+                                       obs.holder[:3, :3] @ self.push.local_direction, s.tip_radius, 2 * s.push.missed_turn,
+                                       s.fingertips)
                 self.sweep_to_face = sweep if np.isfinite(sweep) else 0.0
         if self.phase == "tighten":
             if obs.time < self.grip_until:
@@ -1400,7 +1406,8 @@ class PlanExecutor:
             speed = float(np.clip(s.linear_gain * along, s.min_push_speed, s.push_speed))
             # Keep the push line through the grasp axis: an offset across it would turn the object.
             across = np.cross(self.push.direction, holder[:3, 0])
-            touching = obs.pusher[:3, 3] + leading_tip(self.push.direction, obs.pusher[:3, :3], s.tip_radius)
+            touching = obs.pusher[:3, 3] + leading_tip(self.push.direction, obs.pusher[:3, :3], s.tip_radius,
+                                                       s.fingertips.leading_tip)
             offset = float((touching - holder[:3, 3]) @ across)
             relative = np.concatenate([speed * self.push.direction - s.approach_gain * offset * across
                                        + self._tilt_slide(obs) * holder[:3, 0], np.zeros(3)])
@@ -1558,7 +1565,13 @@ class PlanExecutor:
     def _keep_out(self, obs: Observation) -> KeepOut:
         s = self.settings
         return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.tip_radius, 2 * s.tip_radius,
-                        s.clearance)
+                        s.clearance, s.approach.palm_reach)
+
+    def _route(self, start: np.ndarray, goal: np.ndarray, box: KeepOut, prefer: np.ndarray | None = None
+               ) -> list[np.ndarray]:
+        """Waypoints (holder frame) round the keep-out box, with this executor's route rules."""
+        rules = self.settings.approach
+        return route(start, goal, box, prefer, escape_depth=rules.escape_depth, far_side_cost=rules.far_side_cost)
 
     def _head_home(self, obs: Observation, clear_of_turn: bool = False) -> None:
         """Route the pusher back to where it started (RouteError if there is none); before the holder
@@ -1587,7 +1600,7 @@ class PlanExecutor:
         if box.contains(start)[0] and np.any(along):
             start = start - (box.exit_distance(start, -along) + self.settings.approach.exit_margin) * along
             back = [apply(obs.holder, start)]
-        places = back + [apply(obs.holder, w) for w in route(start, goal, box, goal)]
+        places = back + [apply(obs.holder, w) for w in self._route(start, goal, box, goal)]
         orientations = [self._views(obs, place)[0][0] for place in places[:-1]] + [orientation]
         self.push = _Push(np.zeros(3), np.zeros(3), places[-1], places, orientations, 0.0)
         self.waypoint = 0

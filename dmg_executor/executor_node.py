@@ -48,8 +48,6 @@ from dmg_executor.views import CameraModel, TagLayout
 from dmg_planner.objects import load_object
 from dmg_planner.primitives import Primitive, PrimitiveKind
 
-WATCHDOG_PERIOD = 0.05   # s (wall) between checks that the robot is still talking
-STARTUP_WAIT = 3.0   # s (wall) a goal waits for robot state, the camera model and a fresh object pose
 # executor/state: the last 100 messages (2 s at the 50 Hz control rate) kept for readers that lag and,
 # transient local, handed to one that matches late - a bag recorder matched ~1 s after it subscribed
 # lost a run's first states (measured in the demo); a volatile reader (`dmg monitor`) gets no history.
@@ -135,7 +133,7 @@ class ExecutorNode(Node):
         # Wall-clock watchdog: with use_sim_time a dead simulator also stops the clock, and so the tick.
         self.robot_heard = time.monotonic()
         self.tick_finished = time.monotonic()   # a tick that plans pushes holds the subscriptions off a while
-        self.create_timer(WATCHDOG_PERIOD, self.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(values["watchdog_period"], self.watchdog, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"executor up: {holder} holds, {pusher} pushes; control at {values['control_rate']:g} Hz "
                                f"on {values['object_pose_topic']}")
 
@@ -215,7 +213,8 @@ class ExecutorNode(Node):
             raise GoalError(Outcome.BAD_REQUEST, f"alpha {alpha} is outside [0, 1]")
         # Right after start-up on a loaded machine some of these come late; the camera model is not
         # required (without it the pusher keeps its orientation) but a run without it goes blind.
-        await wait_until(self, lambda: self.seen_fresh() and self.camera_inputs() is not None, STARTUP_WAIT)
+        await wait_until(self, lambda: self.seen_fresh() and self.camera_inputs() is not None,
+                         self.values["startup_wait"])
         if self.observation() is None:
             raise GoalError(Outcome.ROBOT_LOST, "no gripper poses or gripper state from the robot: is the sim bridge "
                             f"(or driver) publishing {self.roles['holder']}/endpoint_pose, "

@@ -18,11 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-SLANT_LIMIT_DEG = 60.0   # a face slanted more than this from the push direction lets the pusher slide off
-# A translation push is met by the face's normal force: slanted more than this (about the
-# friction angle), that force misses the grasp axis and turns the object instead of sliding it.
-TRANSLATION_SLANT_DEG = 30.0
-
 
 class PushError(ValueError):
     """No usable push point for a primitive; the message says why."""
@@ -107,9 +102,9 @@ def _unit(vector, what: str) -> np.ndarray:
 
 
 def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, what: str,
-             sides: np.ndarray = np.zeros((0, 3)), slant_limit: float = SLANT_LIMIT_DEG) -> PushPoint:
-    """The push point where the line meets the object, if the face there takes a push: not too
-    slanted, and still there (within a 45 deg slope) at each of `sides` off the line, so the
+             slant_limit: float, sides: np.ndarray = np.zeros((0, 3))) -> PushPoint:
+    """The push point where the line meets the object, if the face there takes a push: not slanted
+    more than `slant_limit` [rad] from the push, and still there (within a 45 deg slope) at each of `sides` off the line, so the
     pusher does not slide off an edge."""
     hit = surface.entry(target, direction)
     if hit is None:
@@ -120,21 +115,24 @@ def _checked(surface: ObjectSurface, target: np.ndarray, direction: np.ndarray, 
         if beside is None or abs(float((beside[0] - point - side) @ direction)) > np.linalg.norm(side) + 1e-6:
             raise PushError(f"{what}: the push at {np.round(point * 1000, 1).tolist()} mm is within "
                             f"{np.linalg.norm(side) * 1000:.0f} mm of the face's edge")
-    slant = np.rad2deg(np.arccos(np.clip(-normal @ direction, -1.0, 1.0)))
+    slant = np.arccos(np.clip(-normal @ direction, -1.0, 1.0))
     if slant > slant_limit:
-        raise PushError(f"{what}: the face at {np.round(point * 1000, 1).tolist()} mm is slanted {slant:.0f} deg "
-                        f"from the push (limit {slant_limit:.0f} deg)")
+        raise PushError(f"{what}: the face at {np.round(point * 1000, 1).tolist()} mm is slanted "
+                        f"{np.rad2deg(slant):.0f} deg from the push (limit {np.rad2deg(slant_limit):.0f} deg)")
     return PushPoint(point, normal, direction)
 
 
-def translation_push(surface: ObjectSurface, contact, translation) -> PushPoint:
-    """Push point for a TRANSLATION of the principal contact by `translation` (object frame)."""
+def translation_push(surface: ObjectSurface, contact, translation, slant_limit: float) -> PushPoint:
+    """Push point for a TRANSLATION of the principal contact by `translation` (object frame), on a face
+    at most `slant_limit` [rad] off square to it: more slanted, the face's normal force misses the grasp
+    axis and turns the object instead of sliding it."""
     along = _unit(translation, "translation")
     # Aim at the contact from the +t side, moving towards -t: the first face met is the one to push.
-    return _checked(surface, np.asarray(contact, float), -along, "translation", slant_limit=TRANSLATION_SLANT_DEG)
+    return _checked(surface, np.asarray(contact, float), -along, "translation", slant_limit)
 
 
-def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, twist_limit: float) -> PushPoint:
+def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, twist_limit: float,
+                  slant_limit: float) -> PushPoint:
     """Push point for moving the object `along` (object frame) out of the grip towards the fingertips:
     its face on the palm side, where the holding gripper's fingers are, is pushed by the pusher's two
     open fingertips either side of them, a half spread from `middle` (the grasp's middle) along
@@ -142,13 +140,14 @@ def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, t
     meet faces that take a translation push, and push square to the line between those points (both
     touch together: one alone would turn the object about the grasp axis), which may turn at most
     `twist_limit` [rad] from `across` (an object turned in the grip); the smallest of `half_spreads`
-    that fits is taken. The point returned is half way between the two."""
+    that fits is taken; each face at most `slant_limit` [rad] off square, as for a translation. The point
+    returned is half way between the two."""
     along, across = _unit(along, "straddle push"), _unit(across, "straddle spread")
     problems = []
     for half in half_spreads:
         try:
             sides = [_checked(surface, np.asarray(middle, float) + sign * half * across, along, "straddle push",
-                              slant_limit=TRANSLATION_SLANT_DEG) for sign in (1.0, -1.0)]
+                              slant_limit) for sign in (1.0, -1.0)]
         except PushError as error:
             problems.append(f"{half * 2000:.0f} mm apart: {error}")
             continue
@@ -177,7 +176,7 @@ def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:
 
 
 def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,
-                  inset: float, edge_margin: float = 0.0) -> PushPoint:
+                  inset: float, slant_limit: float, edge_margin: float = 0.0) -> PushPoint:
     """Push point for a ROTATION of the finger by `angle` about the outward contact normal n,
     the pusher moving along `direction` u (made orthogonal to n).
 
@@ -188,7 +187,7 @@ def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, an
     lever along it, away from the palm, where the object is free); across it towards the palm
     or along the finger beside it turns the object the same way from other sides. The face must
     reach `edge_margin` beyond the push line both ways along the lever: turning, the pusher
-    moves that way on it.
+    moves that way on it; and be at most `slant_limit` [rad] off square (more, the pusher slides off).
     """
     normal = _unit(outward_normal, "contact normal")
     along = _unit(np.asarray(direction, float) - (np.asarray(direction, float) @ normal) * normal, "push direction")
@@ -197,4 +196,4 @@ def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, an
     lever = np.sign(angle) * depth * np.cross(normal, along)
     target = np.asarray(contact, float) + lever - inset * normal
     sideways = edge_margin * np.cross(normal, along)
-    return _checked(surface, target, along, "rotation", np.array([sideways, -sideways]))
+    return _checked(surface, target, along, "rotation", slant_limit, np.array([sideways, -sideways]))

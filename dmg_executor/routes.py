@@ -15,10 +15,6 @@ from itertools import product
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
 
-ESCAPE_DEPTH = 0.035  # m (pusher touching the object: about 20 mm); a start deeper inside the box than this is a fault, not a leftover
-FAR_SIDE_COST = 5.0   # routes behind the object (seen from the preferred side) cost this much more
-PALM_REACH = 0.3   # m beyond the fingertips towards the palm that count as gripper and arm
-
 
 class RouteError(ValueError):
     """No collision-free route; the message says why."""
@@ -68,30 +64,32 @@ class KeepOut:
 
 
 def keep_out(object_vertices: np.ndarray, object_in_holder: np.ndarray, opening: float, finger_radius: float,
-             pusher_reach: float, clearance: float) -> KeepOut:
+             pusher_reach: float, clearance: float, palm_reach: float) -> KeepOut:
     """Box around the object (vertices in its own frame) and the holding gripper's fingers, in the
-    holder's frame, grown by the pusher's reach and the clearance."""
+    holder's frame, grown by the pusher's reach and the clearance; it reaches `palm_reach` beyond the
+    fingertips towards the palm, where the gripper's hand and arm are."""
     vertices = object_vertices @ object_in_holder[:3, :3].T + object_in_holder[:3, 3]
     finger_x = opening / 2 + 2 * finger_radius
-    fingers = np.array([[sign * finger_x, 0.0, z] for sign in (-1, 1) for z in (finger_radius, -PALM_REACH)])
+    fingers = np.array([[sign * finger_x, 0.0, z] for sign in (-1, 1) for z in (finger_radius, -palm_reach)])
     points = np.vstack([vertices, fingers])
     grow = pusher_reach + clearance
     return KeepOut(points.min(axis=0) - grow, points.max(axis=0) + grow)
 
 
 def route(start: np.ndarray, goal: np.ndarray, box: KeepOut, prefer: np.ndarray | None = None,
-          margin: float = 0.002) -> list[np.ndarray]:
-    """Waypoints from `start` to `goal` (outside the box), ending with `goal`. A start just inside
-    the box (the pusher backed out of a push as far as the box was before the object moved)
-    first leaves it through the nearest face. With `prefer` (a point, e.g. where the camera
-    looks from), stretches on the far side of the box cost FAR_SIDE_COST times their length."""
+          margin: float = 0.002, *, escape_depth: float, far_side_cost: float) -> list[np.ndarray]:
+    """Waypoints from `start` to `goal` (outside the box), ending with `goal`. A start inside the box
+    by at most `escape_depth` (the pusher backed out of a push as far as the box was before the object
+    moved) first leaves it through the nearest face; deeper is a fault. With `prefer` (a point, e.g.
+    where the camera looks from), stretches on the far side of the box cost `far_side_cost` times their
+    length."""
     if box.contains(goal)[0]:
         raise RouteError(f"the pusher's goal {np.round(goal * 1000, 1).tolist()} mm is inside the space "
                          "kept free around the object and the holding gripper")
     escape = []
     if box.contains(start)[0]:
         depth = float(np.min(np.concatenate([start - box.low, box.high - start])))
-        if depth > ESCAPE_DEPTH:
+        if depth > escape_depth:
             raise RouteError(f"the pusher at {np.round(start * 1000, 1).tolist()} mm is "
                              f"{depth * 1000:.0f} mm inside the space kept free around the object")
         start = box.nearest_outside(start, margin)
@@ -109,7 +107,7 @@ def route(start: np.ndarray, goal: np.ndarray, box: KeepOut, prefer: np.ndarray 
         centre = (box.low + box.high) / 2
         towards = (prefer - centre) / max(np.linalg.norm(prefer - centre), 1e-9)
         behind = (nodes - centre) @ towards < 0
-        lengths *= np.where(behind[first] | behind[second], FAR_SIDE_COST, 1.0)
+        lengths *= np.where(behind[first] | behind[second], far_side_cost, 1.0)
     weights[first[free], second[free]] = lengths[free]
     distances, predecessors = shortest_path(weights, directed=False, indices=0, return_predecessors=True)
     if not np.isfinite(distances[1]):

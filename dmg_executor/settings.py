@@ -38,6 +38,9 @@ class ApproachSettings:
     other_views: int
     distinct_view: float           # rad
     view_short: float              # rad
+    escape_depth: float
+    far_side_cost: float
+    palm_reach: float
 
 
 @dataclass(frozen=True)
@@ -54,13 +57,21 @@ class PushSettings:
     missed_near_distance: float
     missed_near: float             # rad
     touched: float
+    slant_limit: float             # rad
+    translation_slant: float       # rad
 
 
 @dataclass(frozen=True)
 class FingertipSettings:
-    """The pusher's fingertips sweeping onto a face (`fingertips.*`)."""
+    """Where the pusher's round fingertips meet a face (`fingertips.*`)."""
 
+    leading_tip: float
+    tip_clearance: float
+    rims: np.ndarray               # rad
+    rim_turn_step: float           # rad
     sweep_limit: float             # rad
+    sweep_step: float              # rad
+    sweep_reach: float
     sweep_back: float
 
 
@@ -116,6 +127,20 @@ class StraddleSettings:
     fingers: float                 # rad
 
 
+@dataclass(frozen=True)
+class ViewSettings:
+    """Which tags the wrist camera would see from a pusher pose (`views.*`)."""
+
+    grid_step: float               # rad
+    edge_margin_px: float
+    facing_limit: float            # rad
+    smallest_side_px: float
+    level: float                   # rad
+    in_line: float                 # rad
+    nearest: float
+    surface_slack: float
+
+
 def _value(annotation: Any, name: str, values: dict[str, Any]) -> Any:
     """values[name] (or values[name + "_deg"] in radians) as the field's type."""
     degrees = name not in values
@@ -136,7 +161,7 @@ def _group(group_class: type, prefix: str, values: dict[str, Any]) -> Any:
 
 GROUPS = {"campaign": CampaignSettings, "approach": ApproachSettings, "push": PushSettings,
           "fingertips": FingertipSettings, "monitors": MonitorSettings, "holder": HolderSettings,
-          "look": LookSettings, "level": LevelSettings, "straddle": StraddleSettings}
+          "look": LookSettings, "level": LevelSettings, "straddle": StraddleSettings, "views": ViewSettings}
 
 
 @dataclass(frozen=True)
@@ -204,6 +229,7 @@ class ExecutorSettings:
     look: LookSettings
     level: LevelSettings
     straddle: StraddleSettings
+    views: ViewSettings
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":

@@ -24,21 +24,11 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial.transform import Rotation
 
+from dmg_executor.settings import ViewSettings
 from dmg_perception.tags import tag_corners, tag_pose
 from dmg_planner.objects import ObjectModel
 
-GRID_STEP = np.deg2rad(7.5)
-EDGE_MARGIN = 30.0                   # px a tag corner must keep from the image border (the pose is only planned)
-FACING_COSINE = np.cos(np.deg2rad(70.0))   # a tag seen more edge-on than this is not counted
-# A tag whose black square's shortest side projects shorter than this [px] is not counted: of the
-# tags this model counted on the wrist-camera frames of three eval runs, cv2.aruco found 0-69 % at
-# 17-22 px and every one of 1533 at 23 px or more (3 px per cell of the 8 across).
-SMALLEST_SIDE = 24.0
-LEVEL_SINE = np.sin(np.deg2rad(15.0))   # fingertip axis across a push line: at most this far off
-IN_LINE_COSINE = np.cos(np.deg2rad(30.0))   # fingertips one behind the other along a push: at most this far off
-NEAREST = 0.04                       # m; closer to the camera than this is not in view
 MARGIN_SCALE = 1.25                  # the tag's white margin: one cell of the 8 across its black square
-SURFACE_SLACK = 0.002                # m; a ray hitting the object this close before a tag point reaches it
 
 
 @dataclass
@@ -124,10 +114,11 @@ class Occluders:
         return np.vstack([self.hand, self.fingers])
 
 
-def turns(tilt_limit: float, roll_limit: float) -> np.ndarray:
-    """(n, 3, 3) rotations in the pusher's own frame: a tilt of the finger axis (z), then a roll about it."""
-    tilts = np.arange(-tilt_limit, tilt_limit + 1e-9, GRID_STEP)
-    rolls = np.arange(-roll_limit, roll_limit + 1e-9, 2 * GRID_STEP)
+def turns(tilt_limit: float, roll_limit: float, step: float) -> np.ndarray:
+    """(n, 3, 3) rotations in the pusher's own frame: a tilt of the finger axis (z) on a grid of `step`
+    [rad], then a roll about it on a grid of twice that."""
+    tilts = np.arange(-tilt_limit, tilt_limit + 1e-9, step)
+    rolls = np.arange(-roll_limit, roll_limit + 1e-9, 2 * step)
     a, b, c = np.meshgrid(tilts, tilts, rolls, indexing="ij")
     keep = np.hypot(a, b) <= tilt_limit + 1e-9
     tilt = Rotation.from_rotvec(np.column_stack([a[keep], b[keep], np.zeros(keep.sum())]))
@@ -146,21 +137,24 @@ def _hidden_by_spheres(cameras: np.ndarray, points: np.ndarray, spheres: np.ndar
     return (gap2 < spheres[:, None, :, 3] ** 2).any(axis=2)
 
 
-def _hidden_by_object(scene: o3d.t.geometry.RaycastingScene, cameras: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(n, p): does the object (its mesh, object frame) stand between camera n and its own point p?"""
+def _hidden_by_object(scene: o3d.t.geometry.RaycastingScene, cameras: np.ndarray, points: np.ndarray,
+                      slack: float) -> np.ndarray:
+    """(n, p): does the object (its mesh, object frame) stand between camera n and its own point p, by
+    more than `slack` [m] (a tag point lies on the surface)?"""
     ray = points[None] - cameras[:, None]
     rays = np.concatenate([np.broadcast_to(cameras[:, None], ray.shape), ray], axis=2).reshape(-1, 6)
     hit = scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy().reshape(ray.shape[:2])
-    return hit < 1.0 - SURFACE_SLACK / np.linalg.norm(ray, axis=2)
+    return hit < 1.0 - slack / np.linalg.norm(ray, axis=2)
 
 
 def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
-               orientations: np.ndarray, occluders: Occluders | None = None,
+               orientations: np.ndarray, rules: ViewSettings, occluders: Occluders | None = None,
                scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[np.ndarray, np.ndarray]:
     """For pusher orientations (n, 3, 3) with the grasp frame at `tip` (base frame): the number of
-    tags wholly in view and large enough to be detected, facing the camera and (given the occluders
-    and the object's ray casting scene) hidden by nothing, and their mean distance from the image
-    centre [px]."""
+    tags wholly in view (corners `rules.edge_margin_px` inside the image, farther than `rules.nearest`)
+    and large enough to be detected (`rules.smallest_side_px`), facing the camera (within
+    `rules.facing_limit`) and (given the occluders and the object's ray casting scene) hidden by
+    nothing, and their mean distance from the image centre [px]."""
     rotation, origin = object_pose[:3, :3], object_pose[:3, 3]
     corners = tags.corners.reshape(-1, 3) @ rotation.T + origin                                # (4t, 3)
     normals = tags.normals @ rotation.T
@@ -169,17 +163,18 @@ def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, ti
     position = tip + orientations @ camera.in_pusher[:3, 3]                                   # (n, 3)
     local = np.einsum("nji,nkj->nki", optical, corners[None] - position[:, None])             # (n, 4t, 3)
     depth = local[..., 2]
-    safe = np.where(depth > NEAREST, depth, np.inf)
+    margin = rules.edge_margin_px
+    safe = np.where(depth > rules.nearest, depth, np.inf)
     u = camera.intrinsics[0, 0] * local[..., 0] / safe + camera.intrinsics[0, 2]
     v = camera.intrinsics[1, 1] * local[..., 1] / safe + camera.intrinsics[1, 2]
-    inside = ((depth > NEAREST) & (u > EDGE_MARGIN) & (u < camera.width - EDGE_MARGIN)
-              & (v > EDGE_MARGIN) & (v < camera.height - EDGE_MARGIN))
+    inside = ((depth > rules.nearest) & (u > margin) & (u < camera.width - margin)
+              & (v > margin) & (v < camera.height - margin))
     inside = inside.reshape(len(orientations), -1, 4).all(axis=2)                              # (n, t)
     square = np.stack([u, v], axis=2).reshape(len(orientations), -1, 4, 2)
     sides = np.linalg.norm(square - np.roll(square, -1, axis=2), axis=3).min(axis=2)          # (n, t)
-    inside &= sides >= SMALLEST_SIDE
+    inside &= sides >= rules.smallest_side_px
     towards = position[:, None] - centres[None]
-    facing = np.einsum("ntk,tk->nt", towards, normals) > FACING_COSINE * np.linalg.norm(towards, axis=2)
+    facing = np.einsum("ntk,tk->nt", towards, normals) > np.cos(rules.facing_limit) * np.linalg.norm(towards, axis=2)
     seen = inside & facing
     rows = np.flatnonzero(seen.any(axis=1))
     if len(rows) and (occluders is not None or scene is not None):
@@ -194,7 +189,7 @@ def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, ti
             hidden |= _hidden_by_spheres(position[rows], samples.reshape(-1, 3) @ rotation.T + origin, spheres)
         if scene is not None:
             cameras = (position[rows] - origin) @ rotation                                   # object frame
-            hidden |= _hidden_by_object(scene, cameras, samples.reshape(-1, 3))
+            hidden |= _hidden_by_object(scene, cameras, samples.reshape(-1, 3), rules.surface_slack)
         seen[rows] &= ~hidden.reshape(len(rows), -1, count).any(axis=2)
     off_centre = np.hypot(u - camera.intrinsics[0, 2], v - camera.intrinsics[1, 2]).reshape(len(orientations), -1, 4)
     off_centre = off_centre.mean(axis=2)
@@ -203,30 +198,30 @@ def view_score(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, ti
 
 
 def ranked_views(camera: CameraModel, tags: TagLayout, object_pose: np.ndarray, tip: np.ndarray,
-                 neutral: np.ndarray, candidates: np.ndarray, level: np.ndarray | None = None,
+                 neutral: np.ndarray, candidates: np.ndarray, rules: ViewSettings, level: np.ndarray | None = None,
                  occluders: Occluders | None = None, scene: o3d.t.geometry.RaycastingScene | None = None,
                  in_line: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pusher orientations (m, 3, 3) among `neutral` @ candidates with the grasp frame at `tip`, best
     view first, and how many tags each sees.
 
     `level`: a direction the pusher's two fingertips must not be spread along (their axis is
-    its x), the grasp axis. Tips spread along it touch the object off the grasp's middle - the
+    its x; within `rules.level` of square to it), the grasp axis. Tips spread along it touch the object off the grasp's middle - the
     leading one first, as the hand is never exactly square to the face - and twist the object
     out of the grasp (measured: 5.6 deg about the finger axis over a 3 mm push); tips in a
     plane across it push in line with the grasp.
 
     `in_line`: a push direction. Among views that see as many tags, those with the tips one
-    behind the other along it come first: tips side by side across the push touch one before
+    behind the other along it (within `rules.in_line`) come first: tips side by side across the push touch one before
     the other and turn the object about the grasp axis (measured: 4-29 deg over a 13 mm push).
     """
     orientations = neutral @ candidates
     turn = np.linalg.norm(Rotation.from_matrix(candidates).as_rotvec(), axis=1)
     if level is not None:
-        keep = np.abs(orientations[:, :, 0] @ level) < LEVEL_SINE
+        keep = np.abs(orientations[:, :, 0] @ level) < np.sin(rules.level)
         if keep.any():
             orientations, turn = orientations[keep], turn[keep]
-    count, off_centre = view_score(camera, tags, object_pose, tip, orientations, occluders, scene)
+    count, off_centre = view_score(camera, tags, object_pose, tip, orientations, rules, occluders, scene)
     crossed = np.zeros(len(orientations), bool) if in_line is None else \
-        np.abs(orientations[:, :, 0] @ in_line) < IN_LINE_COSINE
+        np.abs(orientations[:, :, 0] @ in_line) < np.cos(rules.in_line)
     order = np.lexsort((turn, np.round(off_centre / 20.0), crossed, -count))
     return orientations[order], count[order]

@@ -6,6 +6,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dmg_executor.ects import arm_twists, task_twists
+from dmg_executor.settings import ExecutorSettings
+
+RULES = ExecutorSettings.defaults()     # the shipped rules (config/executor.yaml)
 
 
 @pytest.mark.parametrize("alpha", [0.0, 0.25, 0.5, 1.0])
@@ -48,7 +51,7 @@ def test_translation_push_is_on_the_face_ahead_of_the_contact_and_pushes_back(bo
     from dmg_executor.push_points import translation_push
 
     # Contact on the top face (z = 20 mm) moving +x by 30 mm: the object must go -x, pushed on its +x end.
-    push = translation_push(box_surface, [0.01, 0.005, 0.02 - 1e-4], [0.03, 0.0, 0.0])
+    push = translation_push(box_surface, [0.01, 0.005, 0.02 - 1e-4], [0.03, 0.0, 0.0], RULES.push.translation_slant)
     assert push.point == pytest.approx([0.05, 0.005, 0.02 - 1e-4], abs=1e-6)
     assert push.normal == pytest.approx([1, 0, 0], abs=1e-6) and push.direction == pytest.approx([-1, 0, 0])
 
@@ -61,7 +64,8 @@ def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surfa
     for angle in (0.4, -0.4):
         # Across the finger (the paper's push, on a +-y face) and along it (on the +-x end).
         for direction, face_axis in (([0, 1.0, 0], 1), ([0, -1.0, 0], 1), ([-1.0, 0, 0], 0)):
-            push = rotation_push(box_surface, contact, normal, direction, angle, depth=0.02, inset=0.005)
+            push = rotation_push(box_surface, contact, normal, direction, angle, depth=0.02, inset=0.005,
+                                 slant_limit=RULES.push.slant_limit)
             lever = np.cross(normal, push.direction) @ (push.point - contact)
             assert abs(lever) == pytest.approx(0.02) and push.point[2] == pytest.approx(0.015)
             assert abs(push.point[face_axis]) == pytest.approx((0.05, 0.03)[face_axis])   # on the face it enters
@@ -77,9 +81,9 @@ def test_translations_are_pushed_square_onto_a_face(box_surface):
     assert np.allclose(exit_normals(box_surface, np.zeros(3), rays), [[1, 0, 0], [0, -1, 0], [0, 0, 1]], atol=1e-6)
     # A push 45 deg onto the +z face would turn the box (the face's force misses the grasp axis); 15 deg is taken.
     with pytest.raises(PushError, match="slanted 45 deg"):
-        translation_push(box_surface, np.zeros(3), [0.0, 1.0, 1.0])
+        translation_push(box_surface, np.zeros(3), [0.0, 1.0, 1.0], RULES.push.translation_slant)
     tilted = np.array([0.0, np.sin(np.deg2rad(15.0)), np.cos(np.deg2rad(15.0))])
-    assert translation_push(box_surface, np.zeros(3), tilted).point[2] == pytest.approx(0.02)
+    assert translation_push(box_surface, np.zeros(3), tilted, RULES.push.translation_slant).point[2] == pytest.approx(0.02)
 
 
 @pytest.mark.parametrize("name", ["box", "bracket", "plug"])
@@ -159,17 +163,17 @@ def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lev
 
 
 def test_a_push_starts_with_the_fingertip_that_meets_the_face_first_on_the_push_line():
-    from dmg_executor.fingertips import LEADING_TIP, leading_tip
+    from dmg_executor.fingertips import leading_tip
 
     radius, push = 0.008, np.array([0.0, 1.0, 0.0])
     ahead_count = 0
     for orientation in Rotation.random(200, random_state=3).as_matrix():
         for direction in (push, -push):
-            offset = leading_tip(direction, orientation, radius)
+            offset = leading_tip(direction, orientation, radius, RULES.fingertips.leading_tip)
             assert offset @ direction == pytest.approx(0.0, abs=1e-12)   # across the push only
             tips = (+radius * orientation[:, 0], -radius * orientation[:, 0])
             ahead = max(tips, key=lambda tip: float(tip @ direction))
-            if abs(float(orientation[:, 0] @ direction)) < LEADING_TIP:
+            if abs(float(orientation[:, 0] @ direction)) < RULES.fingertips.leading_tip:
                 # Tips side by side: neither is clearly ahead, nothing to move.
                 assert not offset.any()
                 continue
@@ -183,7 +187,7 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
     """Set back along the push line alone, tips side by side on a face slanted to the push are not
     equally far from it: one would start inside it. Each starts at least `gap` (along the push)
     from the face's plane, the nearer one exactly that; one clearly nearer meets it at the push point."""
-    from dmg_executor.fingertips import LEADING_TIP, push_start
+    from dmg_executor.fingertips import push_start
 
     radius, gap, point = 0.008, 0.006, np.array([0.01, 0.02, 0.03])
     random = np.random.default_rng(5)
@@ -195,12 +199,12 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
         axis = np.cross(direction, random.normal(size=3))
         slant = Rotation.from_rotvec(np.deg2rad(random.uniform(0.0, 55.0)) * axis / np.linalg.norm(axis))
         normal = -(slant.as_matrix() @ direction)
-        start = push_start(point, normal, direction, orientation, radius, gap)
+        start = push_start(point, normal, direction, orientation, radius, gap, RULES.fingertips, RULES.push.slant_limit)
         tips = start + radius * np.outer([1.0, -1.0], orientation[:, 0])
         travel = ((tips - point) @ normal - radius) / -(direction @ normal)   # along the push to the plane
         assert travel.min() == pytest.approx(gap, abs=1e-9), travel
         nearer = -(normal @ orientation[:, 0])
-        if abs(nearer) >= LEADING_TIP:
+        if abs(nearer) >= RULES.fingertips.leading_tip:
             cases["ahead"] += 1
             tip = tips[0 if nearer > 0 else 1]
             # That tip's sphere, moved on by `gap`, touches the face at the push point.
@@ -214,7 +218,7 @@ def test_a_push_starts_with_both_fingertips_clear_of_a_face_slanted_to_the_push(
     normal = Rotation.from_rotvec(np.deg2rad(41.0) * np.array([1.0, 0.0, 0.0])).as_matrix() @ -direction
     orientation = np.column_stack([across, -direction, np.cross(across, -direction)])
     old = point - (radius + gap) * direction
-    for start, outside in ((old, False), (push_start(point, normal, direction, orientation, radius, gap), True)):
+    for start, outside in ((old, False), (push_start(point, normal, direction, orientation, radius, gap, RULES.fingertips, RULES.push.slant_limit), True)):
         tips = start + radius * np.outer([1.0, -1.0], across)
         assert bool(((tips - point) @ normal).min() > radius) is outside
 
@@ -234,10 +238,11 @@ def test_a_push_starts_gap_from_where_a_fingertip_meets_the_object_not_from_the_
     across = np.array([0.0, -np.sin(ahead), np.cos(ahead)])       # the tips' axis: the lower tip ahead along +y
     orientation = np.column_stack([across, [1.0, 0.0, 0.0], np.cross(across, [1.0, 0.0, 0.0])])
     push, normal = np.array([0.0, 1.0, 0.0]), np.array([0.0, -1.0, 0.0])
-    meets = lambda start: plug.travel(start + fingertip_fronts(push, orientation, radius), push)   # noqa: E731
+    meets = lambda start: plug.travel(start + fingertip_fronts(push, orientation, radius, RULES.fingertips), push)   # noqa: E731
     for height, late in ((-0.018, True), (0.0, False)):
-        start = push_start(np.array([0.0, -0.030, height]), normal, push, orientation, radius, gap)
-        moved = meeting_start(start, orientation, push, np.eye(4), plug, radius, gap)
+        start = push_start(np.array([0.0, -0.030, height]), normal, push, orientation, radius, gap, RULES.fingertips,
+                           RULES.push.slant_limit)
+        moved = meeting_start(start, orientation, push, np.eye(4), plug, radius, gap, RULES.fingertips)
         assert meets(moved) == pytest.approx(gap, abs=1e-4)
         if late:
             assert meets(start) > gap + 0.003, meets(start)
@@ -250,14 +255,15 @@ def test_push_points_that_do_not_exist_are_refused(box_surface):
     from dmg_executor.push_points import PushError, rotation_push, translation_push
 
     with pytest.raises(PushError, match="misses the object"):
-        translation_push(box_surface, [0.0, 0.2, 0.0], [1.0, 0.0, 0.0])
+        translation_push(box_surface, [0.0, 0.2, 0.0], [1.0, 0.0, 0.0], RULES.push.translation_slant)
     with pytest.raises(PushError, match="no direction"):
-        translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0])
+        translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0], RULES.push.translation_slant)
     with pytest.raises(PushError, match="not a rotation"):
-        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [0, 1, 0], 0.0, depth=0.03, inset=0.005)
+        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [0, 1, 0], 0.0, depth=0.03, inset=0.005,
+                      slant_limit=RULES.push.slant_limit)
     # Along the finger 20 mm beside it, the +-x end face (60 mm wide) has 10 mm left beyond the push line.
     along = dict(contact=[0, 0, 0.02], outward_normal=[0, 0, 1], direction=[-1.0, 0, 0], angle=0.4, depth=0.02,
-                 inset=0.005)
+                 inset=0.005, slant_limit=RULES.push.slant_limit)
     assert rotation_push(box_surface, **along, edge_margin=0.008).point[0] == pytest.approx(0.05)
     with pytest.raises(PushError, match="within 12 mm of the face's edge"):
         rotation_push(box_surface, **along, edge_margin=0.012)
@@ -271,20 +277,22 @@ def test_a_straddle_push_meets_the_palm_side_face_either_side_of_the_fingers_and
     # along +y with the grasp's middle 10.5 mm in from its -y edge: the tips straddle them on that edge.
     plate = ObjectSurface(*box_union_mesh(load_object("bracket").parts))
     middle, halves, limit = np.array([-0.0015, -0.0105, 0.004]), [0.02, 0.028], np.deg2rad(15.0)
-    push = straddle_push(plate, middle, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit)
+    push = straddle_push(plate, middle, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit, RULES.push.translation_slant)
     assert push.point == pytest.approx([-0.0015, -0.03, 0.004], abs=1e-6) and push.spread == pytest.approx(0.04)
     assert push.direction == pytest.approx([0.0, 1.0, 0.0]) and push.normal == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
     # The plate turned 8 deg in the grip: the tips line up with its edge and push square onto it.
     turn = np.deg2rad(8.0)
     along, across = [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0]
-    turned = straddle_push(plate, middle, along, across, halves, limit)
+    turned = straddle_push(plate, middle, along, across, halves, limit, RULES.push.translation_slant)
     assert turned.direction == pytest.approx([0.0, 1.0, 0.0], abs=1e-6) and turned.spread == pytest.approx(0.04 / np.cos(turn))
     with pytest.raises(PushError, match="turned 20 deg from across the fingers"):
         turn = np.deg2rad(20.0)
-        straddle_push(plate, middle, [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0], halves, limit)
+        straddle_push(plate, middle, [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0], halves, limit,
+                      RULES.push.translation_slant)
     # 45 mm from its end, one tip would be beyond the plate at either spread.
     with pytest.raises(PushError, match="40 mm apart: straddle push: the push line misses the object; 56 mm apart"):
-        straddle_push(plate, [-0.045, -0.0105, 0.004], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit)
+        straddle_push(plate, [-0.045, -0.0105, 0.004], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit,
+                      RULES.push.translation_slant)
 
 
 # --- routes round the object -------------------------------------------------------------------
@@ -293,19 +301,20 @@ def test_routes_go_round_the_keep_out_box_and_prefer_the_near_side():
 
     box = KeepOut(np.array([-0.05, -0.05, -0.3]), np.array([0.05, 0.05, 0.08]))
     start, goal = np.array([0.0, 0.2, 0.0]), np.array([0.0, -0.2, 0.0])    # opposite sides
-    path = [start] + route(start, goal, box)
+    rules = dict(escape_depth=RULES.approach.escape_depth, far_side_cost=RULES.approach.far_side_cost)
+    path = [start] + route(start, goal, box, **rules)
     assert np.allclose(path[-1], goal)
     starts, ends = np.array(path[:-1]), np.array(path[1:])
     assert not box.crosses(starts, ends).any()            # no stretch passes through the box
     assert box.crosses(start[None], goal[None])[0]         # while the straight line would
     # Both ways round (over +x or -x) are as long; preferring +x takes the +x side.
-    preferred = route(start, goal, box, prefer=np.array([0.5, 0.0, 0.0]))
+    preferred = route(start, goal, box, prefer=np.array([0.5, 0.0, 0.0]), **rules)
     assert all(p[0] > -0.05 for p in preferred)
     # A start just inside leaves through the nearest face first; a goal inside is refused.
     inside = np.array([0.0, 0.04, 0.0])
-    assert route(inside, goal, box)[0][1] > 0.05
+    assert route(inside, goal, box, **rules)[0][1] > 0.05
     with pytest.raises(RouteError, match="goal"):
-        route(start, np.zeros(3), box)
+        route(start, np.zeros(3), box, **rules)
 
 
 def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_would_not():
@@ -322,8 +331,9 @@ def test_view_choice_keeps_the_tags_in_the_image_where_the_home_orientation_woul
     object_pose[:3, :3] = np.column_stack([[0, 0, 1], [1, 0, 0], [0, -1, 0]])
     home = np.column_stack([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).astype(float)
     below = np.array([0.0, 0.0, -0.065])                  # under the box, where a push upwards starts
-    seen_home, _ = view_score(camera, tags, object_pose, below, home[None])
-    orientations, seen = ranked_views(camera, tags, object_pose, below, home, turns(np.deg2rad(30), np.deg2rad(90)))
+    seen_home, _ = view_score(camera, tags, object_pose, below, home[None], RULES.views)
+    orientations, seen = ranked_views(camera, tags, object_pose, below, home,
+                                      turns(np.deg2rad(30), np.deg2rad(90), RULES.views.grid_step), RULES.views)
     assert seen_home[0] == 0 and seen[0] >= 1 and np.all(np.diff(seen) <= 0)   # best first
     tilt = np.rad2deg(np.arccos(np.clip(orientations[0][:, 2] @ home[:, 2], -1, 1)))
     assert 0 < tilt <= 30 + 1e-6                          # it had to turn the fingers, within the limit
@@ -362,7 +372,7 @@ def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
     tip, looking = np.array([0.0, 0.0, -0.2]), np.eye(3)[None]
 
     def seen(occluders=None, scene=None) -> int:
-        return int(view_score(camera, tags, np.eye(4), tip, looking, occluders, scene)[0][0])
+        return int(view_score(camera, tags, np.eye(4), tip, looking, RULES.views, occluders, scene)[0][0])
 
     none = np.zeros((0, 4))
     assert seen() == 1 and seen(Occluders(none, none, none)) == 1
@@ -384,11 +394,11 @@ def test_a_tag_hidden_by_a_gripper_or_by_the_object_itself_is_not_counted():
 
 
 def test_a_tag_too_small_in_the_image_to_be_detected_is_not_counted():
-    """A tag counts only if its black square's shortest side spans SMALLEST_SIDE pixels (cv2.aruco
+    """A tag counts only if its black square's shortest side spans `views.smallest_side_px` pixels (cv2.aruco
     missed most below it on the wrist camera's renders): too far away, or seen too obliquely."""
     from scipy.spatial.transform import Rotation
 
-    from dmg_executor.views import SMALLEST_SIDE, CameraModel, TagLayout, view_score
+    from dmg_executor.views import CameraModel, TagLayout, view_score
 
     half, focal = 0.012, 400.0         # a 24 mm tag facing -z; at 20 cm it spans 48 px
     tags = TagLayout(np.array([[[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]]]),
@@ -398,9 +408,9 @@ def test_a_tag_too_small_in_the_image_to_be_detected_is_not_counted():
     def seen(distance: float, turned_deg: float = 0.0) -> int:
         pose = np.eye(4)
         pose[:3, :3] = Rotation.from_euler("y", turned_deg, degrees=True).as_matrix()
-        return int(view_score(camera, tags, pose, np.array([0.0, 0.0, -distance]), np.eye(3)[None])[0][0])
+        return int(view_score(camera, tags, pose, np.array([0.0, 0.0, -distance]), np.eye(3)[None], RULES.views)[0][0])
 
-    far = 2 * half * focal / (SMALLEST_SIDE - 3.0)        # the tag 3 px short of the limit
+    far = 2 * half * focal / (RULES.views.smallest_side_px - 3.0)        # the tag 3 px short of the limit
     assert seen(0.2) == 1 and seen(far * 0.85) == 1 and seen(far) == 0
     assert seen(0.2, 45.0) == 1 and seen(0.2, 64.0) == 0     # edge-on at 64 deg: 21 px across
 
@@ -1149,11 +1159,10 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
 def _pusher_in_the_bracket_corner(bracket_run):
     """An executor for the bracket and an observation with its pusher stopped in the bracket's corner (between
     plate and wall: 15 mm from the wall's inner face, 17 mm over the plate, halfway across), deeper inside the
-    keep-out box than ESCAPE_DEPTH; and the way down onto the plate there (holder frame)."""
+    keep-out box than `approach.escape_depth`; and the way down onto the plate there (holder frame)."""
     from dataclasses import replace
 
     from dmg_common.transforms import apply, invert
-    from dmg_executor.routes import ESCAPE_DEPTH
 
     cell, loop, make = bracket_run
     executor = make()
@@ -1167,7 +1176,7 @@ def _pusher_in_the_bracket_corner(bracket_run):
     box = executor._keep_out(observation)
     inside = apply(invert(observation.holder), stopped[:3, 3])
     assert box.contains(inside)[0]
-    assert np.min(np.concatenate([inside - box.low, box.high - inside])) > ESCAPE_DEPTH     # too deep to just step out
+    assert np.min(np.concatenate([inside - box.low, box.high - inside])) > RULES.approach.escape_depth     # too deep to just step out
     down = observation.holder[:3, :3].T @ object_pose[:3, :3] @ np.array([0.0, 0.0, -1.0])
     return executor, observation, down
 
@@ -1213,7 +1222,7 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     """The bracket's wall pushed from its corner just above the plate, the pusher turned as it started
     (without a camera model no other view is tried): its fingertips side by side along the wall's height,
     set back from the wall's plane the lower one starts inside the plate - its way in goes through it.
-    That start is refused, saying so; higher up the wall, clear of the plate (TIP_CLEARANCE all round
+    That start is refused, saying so; higher up the wall, clear of the plate (`fingertips.tip_clearance` all round
     both tips), the push is taken."""
     from dmg_common.transforms import apply, invert
     from dmg_executor.fingertips import fingertip_shells, push_start
@@ -1232,11 +1241,12 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     normal, along = np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])      # the wall's inner face, pushed out
 
     def tip_inside(start, view) -> bool:
-        return bool(executor.surface.inside(apply(invert(object_pose), start + fingertip_shells(view, radius))).any())
+        shells = fingertip_shells(view, radius, executor.settings.fingertips.tip_clearance)
+        return bool(executor.surface.inside(apply(invert(object_pose), start + shells)).any())
 
     low = np.array([0.052, 0.0, 0.008 + radius + 0.001])                      # 1 mm more than a tip over the plate
     start = push_start(apply(object_pose, low), object_pose[:3, :3] @ normal, object_pose[:3, :3] @ along, home,
-                       radius, executor.settings.gap)
+                       radius, executor.settings.gap, executor.settings.fingertips, executor.settings.push.slant_limit)
     assert tip_inside(start, home)
     with pytest.raises(RouteError, match="would put a fingertip into the object however it is turned"):
         executor._push_from(observation, PushPoint(low, normal, along), occluders)
@@ -1807,12 +1817,12 @@ def test_a_rotation_pushers_sweep_meets_a_face_across_it_not_one_it_runs_along(b
     sweep_limit = ExecutorSettings.defaults().fingertips.sweep_limit
     radius, holder, box_pose = 0.008, np.eye(4), np.eye(4)        # the grasp axis along x through the box's centre
     beside = from_rotation(np.eye(3), [0.0, 0.03 + radius + 0.001, 0.018])   # tips side by side along x, 1 mm off
-    turn = sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, -1.0, 0.0]), radius, sweep_limit)
+    turn = sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, -1.0, 0.0]), radius, sweep_limit, RULES.fingertips)
     assert np.deg2rad(0.5) <= turn <= np.deg2rad(3.0), np.rad2deg(turn)
     over = from_rotation(np.eye(3), [0.0, 0.0, 0.02 + radius + 0.001])
-    assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, sweep_limit) == np.inf
+    assert sweep_to_touch(box_surface, box_pose, over, holder, np.array([0.0, 0.0, -1.0]), radius, sweep_limit, RULES.fingertips) == np.inf
     # Turned the other way the pusher sweeps away from the side face: the sense follows the push's direction.
-    assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, sweep_limit) == np.inf
+    assert sweep_to_touch(box_surface, box_pose, beside, holder, np.array([0.0, 1.0, 0.0]), radius, sweep_limit, RULES.fingertips) == np.inf
 
 
 def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_is_wide(loop_parts):

@@ -76,7 +76,9 @@ def test_logs_are_prefixed_and_a_required_exit_stops_all(tmp_path):
 
 def test_optional_node_may_exit(tmp_path):
     launch = _launch_file(tmp_path, [
-        {"name": "once", "command": [sys.executable, "-c", "print('done')"], "required": False},
+        # (it lives a second: one that has already ended cannot be counted among the launcher's children)
+        {"name": "once", "command": [sys.executable, "-c", "import time; time.sleep(1.0); print('done')"],
+         "required": False},
         _talker("talker", "/t"),
     ])
     up, children = _start_up(launch)
