@@ -4,7 +4,7 @@ The tag images are generated with cv2.aruco when the scene is built (no binaries
 repository) and written next to the generated model. Each tag is a thin visual-only box
 whose +z face carries the texture; MuJoCo maps a 2-D texture onto that face with the
 image's top row along the geom's +y and its left column along -x, which is exactly the
-tag-frame convention of dmg_perception.tags (checked by rendering in tests/test_sim_object.py).
+tag-frame convention of dmg_perception.tags (checked by rendering in tests/sim_bridge/test_sim_object.py).
 """
 from __future__ import annotations
 

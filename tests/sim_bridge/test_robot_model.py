@@ -8,6 +8,8 @@ from scipy.spatial.transform import Rotation
 
 from dmg_sim_bridge.robot_model import COMPILER, arm_mjcf, frame, load_robot
 
+pytestmark = pytest.mark.sim
+
 
 def direct_fk(robot: dict, side: str, angles: np.ndarray) -> np.ndarray:
     """Endpoint pose in the torso frame by chaining the URDF transforms (URDF semantics)."""

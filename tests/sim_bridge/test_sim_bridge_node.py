@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from conftest import DMG, REPO, Processes, RosTestNode
 from dmg_perception.tags import detector
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.sim]
 
 ROLES = ("arm1", "arm2")
 

@@ -84,6 +84,7 @@ def test_pose_buffer_interpolates_between_stamps_and_refuses_far_ones():
 
 
 # --- the fused pose on real renders ------------------------------------------------------
+@pytest.mark.sim
 def test_object_pose_from_tags_matches_ground_truth_over_random_poses(cell, estimator):
     """>= 20 random poses of every shipped object in gripper 1, seen from the default camera pose."""
     rng = np.random.default_rng(7)
@@ -106,6 +107,7 @@ def test_object_pose_from_tags_matches_ground_truth_over_random_poses(cell, esti
     assert np.median(errors[:, 0]) <= 0.0015 and np.median(errors[:, 1]) <= 1.0, errors
 
 
+@pytest.mark.sim
 def test_fingers_hiding_a_tag_still_leave_a_pose_from_the_rest(cell, estimator):
     cell.reset(object_name="box")
     clear = estimator.detect(grey(cell))
@@ -127,6 +129,7 @@ def test_fingers_hiding_a_tag_still_leave_a_pose_from_the_rest(cell, estimator):
     assert moved < 0.0015 and np.rad2deg(turned) < 1.0
 
 
+@pytest.mark.sim
 def test_a_tag_that_disagrees_with_the_layout_is_rejected(cell, estimator):
     cell.reset(object_name="box")
     observations = estimator.detect(grey(cell))
@@ -178,6 +181,7 @@ def test_duplicate_tag_ids_across_objects_are_refused():
 
 
 # --- tracking state ----------------------------------------------------------------------
+@pytest.mark.sim
 def test_tracker_reports_searching_then_lost_when_no_tag_is_seen(cell, estimator):
     tracker = Tracker(estimator, lost_timeout=0.8, pose_tolerance=0.05)   # less than the 1 s of black images
     assert tracker.status(0.0).state == TrackingState.NO_CAMERA
@@ -204,6 +208,7 @@ def test_tracker_reports_searching_then_lost_when_no_tag_is_seen(cell, estimator
     assert tracker.prior(cell.time) is None               # ... not once the object was lost
 
 
+@pytest.mark.sim
 def test_tracker_reports_lost_when_images_stop_coming(cell, estimator):
     tracker = Tracker(estimator, lost_timeout=0.5, pose_tolerance=0.05)
     cell.reset(object_name="box")

@@ -43,6 +43,7 @@ def move_to(cell: Cell, role: str, target: np.ndarray, speed: float, tolerance: 
     cell.run(0.1)
 
 
+@pytest.mark.sim
 def test_closed_grip_holds_the_object_within_1mm_and_1deg_for_10s(cell):
     cell.reset()
     start = cell.object_in_gripper("arm1")
@@ -51,6 +52,7 @@ def test_closed_grip_holds_the_object_within_1mm_and_1deg_for_10s(cell):
     assert moved < 0.001 and np.rad2deg(turned) < 1.0
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("name", ["bracket", "box"])
 def test_a_closed_grip_squeezes_with_its_force_limit_however_thin_the_object(cell, name):
     """A gripper closed on an object pushes with the force it was given, as a real one stalled on it
@@ -65,6 +67,7 @@ def test_a_closed_grip_squeezes_with_its_force_limit_however_thin_the_object(cel
         assert status.force == pytest.approx(force, abs=0.2)
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("linear, angular", [((0.05, 0, 0), (0, 0, 0)), ((0, -0.04, 0.03), (0, 0, 0)),
                                              ((0, 0, 0), (0.3, 0, 0)), ((0.02, 0, 0), (0, 0, -0.2))])
 def test_cartesian_velocity_command_moves_the_gripper_at_that_velocity_within_5_percent(cell, linear, angular):
@@ -83,6 +86,7 @@ def test_cartesian_velocity_command_moves_the_gripper_at_that_velocity_within_5_
     assert np.linalg.norm(measured - twist) <= 0.05 * np.linalg.norm(twist), (measured, twist)
 
 
+@pytest.mark.sim
 def test_watchdog_stops_an_arm_whose_commands_stop(cell):
     cell.reset()
     for _ in range(20):
@@ -119,6 +123,7 @@ def push_from_below(cell: Cell, lateral_offset: float, gap: float, travel: float
     return before, cell.object_in_gripper("arm1")
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("direction", [1.0, -1.0])
 def test_the_pushing_hand_rolls_90_deg_either_way_about_its_fingers_from_home(cell, direction):
     # The executor rolls the camera hand up to 90 deg to keep the tags in view: home leaves the wrist room for it.
@@ -134,6 +139,7 @@ def test_the_pushing_hand_rolls_90_deg_either_way_about_its_fingers_from_home(ce
     assert np.rad2deg(turned) > 85.0 and moved < 0.003
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("axis, sign", [(0, 1.0), (1, 1.0), (1, -1.0)])
 def test_a_turn_the_arm_cannot_finish_leaves_the_fingertips_where_they_were(cell, axis, sign):
     # Turned on about its own x or y past what its joints allow, the hand stops turning; its grasp
@@ -150,6 +156,7 @@ def test_a_turn_the_arm_cannot_finish_leaves_the_fingertips_where_they_were(cell
     assert farthest < 0.02, farthest
 
 
+@pytest.mark.sim
 def test_push_with_loosened_grip_translates_the_object_by_the_pushed_distance(cell):
     gap, travel = 0.01, 0.03
     before, after = push_from_below(cell, lateral_offset=0.0, gap=gap, travel=travel, grip=2.0)
@@ -160,6 +167,7 @@ def test_push_with_loosened_grip_translates_the_object_by_the_pushed_distance(ce
     assert np.rad2deg(distance(before, after)[1]) < 2.0
 
 
+@pytest.mark.sim
 def test_off_centre_push_pivots_the_object_about_the_grasp_axis(cell):
     before, after = push_from_below(cell, lateral_offset=0.015, gap=0.01, travel=0.03, grip=2.0)
     turn = Rotation.from_matrix(after[:3, :3] @ before[:3, :3].T).as_rotvec(degrees=True)   # gripper 1 frame
@@ -168,6 +176,7 @@ def test_off_centre_push_pivots_the_object_about_the_grasp_axis(cell):
     assert abs(after[0, 3] - before[0, 3]) < 0.001  # still centred between the fingers
 
 
+@pytest.mark.sim
 def test_a_reset_that_restarts_the_clock_replays_a_push_exactly(cell):
     # `dmg eval` resets so before every run: a run's outcome must not depend on the runs before it.
     cell.reset(object_name="plug")
@@ -184,6 +193,7 @@ def test_a_reset_that_restarts_the_clock_replays_a_push_exactly(cell):
     assert cell.time > ended
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("name", object_names())
 def test_wrist_camera_sees_the_held_objects_tags_where_its_pose_and_intrinsics_say(cell, name):
     cell.reset(object_name=name)
@@ -200,6 +210,7 @@ def test_wrist_camera_sees_the_held_objects_tags_where_its_pose_and_intrinsics_s
         assert np.max(np.abs(found[0] - projected[:, :2])) < 1.0, (name, tag_id)
 
 
+@pytest.mark.sim
 def test_bad_resets_are_refused_with_a_reason_and_keep_the_scene(cell):
     cell.reset(object_name="box")
     cell.run(0.2)
@@ -221,6 +232,7 @@ def test_bad_resets_are_refused_with_a_reason_and_keep_the_scene(cell):
     assert cell.opening("arm1") == pytest.approx(0.100, abs=0.002)
 
 
+@pytest.mark.sim
 def test_a_gripper_command_a_hair_past_the_fingers_travel_is_its_end_one_further_is_refused(cell):
     """An opening measured a hair past the travel (fingers pressed against their stop) and sent
     back as a command moves the fingers to the travel's end; a command clearly outside is refused
@@ -237,6 +249,7 @@ def test_a_gripper_command_a_hair_past_the_fingers_travel_is_its_end_one_further
         assert cell.gripper_status("arm2").target_opening == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("target", ["frames", "run.mp4"])
 def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, target):
     cell.reset(object_name="box")

@@ -3,12 +3,15 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from dmg_planner.objects import load_object
 from dmg_sim_bridge.gripper import gripper_mjcf
 from dmg_sim_bridge.object_model import object_mjcf
 from dmg_sim_bridge.sim_config import load_sim_config
+
+pytestmark = pytest.mark.sim
 
 
 def held_box_scene(tmp_path, force: float):

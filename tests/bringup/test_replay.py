@@ -12,7 +12,7 @@ import pytest
 
 from conftest import DMG, Processes, RosTestNode
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.sim]
 
 INPUTS = ["/clock", "/arm2/camera/image_raw", "/arm2/camera/camera_info", "/arm2/camera/pose", "/arm1/endpoint_pose"]
 OUTPUTS = ["/perception/detections", "/perception/object_pose"]

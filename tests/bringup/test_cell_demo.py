@@ -12,7 +12,7 @@ import pytest
 
 from conftest import DMG, Processes, dmg
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.sim]
 
 
 @pytest.fixture(scope="module")

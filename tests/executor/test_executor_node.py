@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from conftest import DMG, Processes, RosTestNode
 from dmg_common.transforms import distance, homogeneous, invert
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.sim]
 
 TRANSLATION = 0.015            # m the grasp moves along the fingers (the object is pushed up)
 ROTATION = np.deg2rad(20.0)    # rad the grasp turns about the grasp axis

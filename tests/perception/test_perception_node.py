@@ -73,6 +73,7 @@ def cell(tmp_path_factory):
         processes.stop_all()
 
 
+@pytest.mark.sim
 def test_object_pose_in_the_gripper_matches_ground_truth(cell):
     watcher, _ = cell
     pose = watcher.wait_for(lambda: watcher.truth and (m := watcher.latest["/perception/object_pose"]) and
@@ -95,6 +96,7 @@ def test_object_pose_in_the_gripper_matches_ground_truth(cell):
     assert (debug.width, debug.height, debug.encoding) == (640, 480, "rgb8")
 
 
+@pytest.mark.sim
 def test_no_tag_in_view_turns_to_lost_within_the_timeout_and_back(cell):
     watcher, _ = cell
     from geometry_msgs.msg import Pose
@@ -114,6 +116,7 @@ def test_no_tag_in_view_turns_to_lost_within_the_timeout_and_back(cell):
                      what=f"TRACKING again ({watcher.latest['/perception/status']})")
 
 
+@pytest.mark.sim
 def test_corrupted_or_unsupported_images_are_logged_and_the_node_carries_on(cell):
     watcher, processes = cell
     name = "/bad/perception: object tracking"

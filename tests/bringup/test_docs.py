@@ -131,6 +131,7 @@ def _parameters(probe, name: str) -> set[str]:
 
 
 @pytest.mark.ros
+@pytest.mark.sim
 def test_node_pages_name_every_interface_and_parameter_of_the_running_nodes(processes, tmp_path):
     nodes = project_nodes()
     entries = []

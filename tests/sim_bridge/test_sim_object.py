@@ -10,6 +10,8 @@ from dmg_perception.tags import detector, tag_corners, tag_pose
 from dmg_planner.objects import load_object, object_names
 from dmg_sim_bridge.object_model import object_mjcf
 
+pytestmark = pytest.mark.sim
+
 WIDTH, HEIGHT, FOVY = 640, 480, 45.0
 DISTANCE = 0.2
 

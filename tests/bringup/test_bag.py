@@ -1,6 +1,7 @@
 """`dmg bag`: record a live publisher, inspect the bag, replay it with its timing."""
 from __future__ import annotations
 
+import select
 import signal
 import statistics
 import time
@@ -123,10 +124,13 @@ def test_record_takes_the_publishers_qos_even_when_a_subscriber_named_the_topic_
     assert listener.stdout.readline().strip() == "listening"      # a subscriber names the topic first
     recorder = processes.start([DMG, "bag", "record", "-o", str(bag), "/latched"])
     time.sleep(2.0)  # several discovery passes of the recorder with a subscriber and no publisher
-    # Publishes 0..4 at once, then stays up 3 s: the recorder must subscribe late and get them as history.
+    # Publishes 0..4 at once, then stays up: the recorder must subscribe late and get them as history.
     talker = processes.start(helper_command("talker.py", "--topic", "/latched", "--latched", "--count", "5",
-                                            "--gaps", "0.01", "0.01", "0.01", "0.01", "3.0", "--start-delay", "0"))
-    talker.wait(timeout=60)
+                                            "--gaps", "0.01", "0.01", "0.01", "0.01", "30.0", "--start-delay", "0"))
+    ready, _, _ = select.select([recorder.stdout], [], [], 30.0)     # (a loaded machine starts it late)
+    assert ready and "recording /latched" in recorder.stdout.readline()
+    time.sleep(1.0)                                                   # the history arrives once matched
+    talker.terminate()
     recorder.send_signal(signal.SIGINT)
     out, err = recorder.communicate(timeout=30)
     assert recorder.returncode == 0, out + err

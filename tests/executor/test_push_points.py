@@ -1,0 +1,111 @@
+"""Push points (dmg_executor.push_points) on the box (100 x 60 x 40 mm centred at the origin) and the
+bracket: translation, rotation and straddle pushes, exit normals, refusals, and the mesh centroid."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dmg_executor.settings import ExecutorSettings
+from executor_fixtures import box_surface  # noqa: F401
+
+RULES = ExecutorSettings.defaults()     # the shipped rules (config/executor.yaml)
+
+
+def test_translation_push_is_on_the_face_ahead_of_the_contact_and_pushes_back(box_surface):
+    from dmg_executor.push_points import translation_push
+
+    # Contact on the top face (z = 20 mm) moving +x by 30 mm: the object must go -x, pushed on its +x end.
+    push = translation_push(box_surface, [0.01, 0.005, 0.02 - 1e-4], [0.03, 0.0, 0.0], RULES.push.translation_slant)
+    assert push.point == pytest.approx([0.05, 0.005, 0.02 - 1e-4], abs=1e-6)
+    assert push.normal == pytest.approx([1, 0, 0], abs=1e-6) and push.direction == pytest.approx([-1, 0, 0])
+
+
+def test_rotation_push_turns_the_object_the_opposite_way_to_the_finger(box_surface):
+    from dmg_executor.push_points import rotation_push
+
+    # Finger on the top face (outward normal +z) pointing to the palm along -x.
+    contact, normal = np.array([0.0, 0.0, 0.02]), np.array([0, 0, 1.0])
+    for angle in (0.4, -0.4):
+        # Across the finger (the paper's push, on a +-y face) and along it (on the +-x end).
+        for direction, face_axis in (([0, 1.0, 0], 1), ([0, -1.0, 0], 1), ([-1.0, 0, 0], 0)):
+            push = rotation_push(box_surface, contact, normal, direction, angle, depth=0.02, inset=0.005,
+                                 slant_limit=RULES.push.slant_limit)
+            lever = np.cross(normal, push.direction) @ (push.point - contact)
+            assert abs(lever) == pytest.approx(0.02) and push.point[2] == pytest.approx(0.015)
+            assert abs(push.point[face_axis]) == pytest.approx((0.05, 0.03)[face_axis])   # on the face it enters
+            torque = np.cross(push.point - contact, push.direction) @ normal   # about the outward normal
+            assert np.sign(torque) == -np.sign(angle)                 # the object turns by -angle
+
+
+def test_translations_are_pushed_square_onto_a_face(box_surface):
+    from dmg_executor.push_points import PushError, exit_normals, translation_push
+
+    # Rays from the box's centre leave it through the face they point at.
+    rays = np.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0.6, 0.8]])
+    assert np.allclose(exit_normals(box_surface, np.zeros(3), rays), [[1, 0, 0], [0, -1, 0], [0, 0, 1]], atol=1e-6)
+    # A push 45 deg onto the +z face would turn the box (the face's force misses the grasp axis); 15 deg is taken.
+    with pytest.raises(PushError, match="slanted 45 deg"):
+        translation_push(box_surface, np.zeros(3), [0.0, 1.0, 1.0], RULES.push.translation_slant)
+    tilted = np.array([0.0, np.sin(np.deg2rad(15.0)), np.cos(np.deg2rad(15.0))])
+    assert translation_push(box_surface, np.zeros(3), tilted, RULES.push.translation_slant).point[2] == pytest.approx(0.02)
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("name", ["box", "bracket", "plug"])
+def test_the_mesh_centroid_is_the_centre_of_mass_mujoco_gives_the_object(name, tmp_path):
+    import mujoco
+
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import load_object
+    from dmg_sim_bridge.object_model import object_mjcf
+
+    model = load_object(name)
+    assets, body = object_mjcf(model, tmp_path)
+    compiled = mujoco.MjModel.from_xml_string(f"<mujoco><asset>{assets}</asset><worldbody>{body}</worldbody></mujoco>")
+    surface = ObjectSurface.of(model)
+    assert surface.mass == pytest.approx(compiled.body("object").mass[0])
+    assert np.allclose(surface.centre_of_mass, compiled.body("object").ipos, atol=1e-5)
+
+
+def test_push_points_that_do_not_exist_are_refused(box_surface):
+    from dmg_executor.push_points import PushError, rotation_push, translation_push
+
+    with pytest.raises(PushError, match="misses the object"):
+        translation_push(box_surface, [0.0, 0.2, 0.0], [1.0, 0.0, 0.0], RULES.push.translation_slant)
+    with pytest.raises(PushError, match="no direction"):
+        translation_push(box_surface, [0.0, 0.0, 0.02], [0.0, 0.0, 0.0], RULES.push.translation_slant)
+    with pytest.raises(PushError, match="not a rotation"):
+        rotation_push(box_surface, [0, 0, 0.02], [0, 0, 1], [0, 1, 0], 0.0, depth=0.03, inset=0.005,
+                      slant_limit=RULES.push.slant_limit)
+    # Along the finger 20 mm beside it, the +-x end face (60 mm wide) has 10 mm left beyond the push line.
+    along = dict(contact=[0, 0, 0.02], outward_normal=[0, 0, 1], direction=[-1.0, 0, 0], angle=0.4, depth=0.02,
+                 inset=0.005, slant_limit=RULES.push.slant_limit)
+    assert rotation_push(box_surface, **along, edge_margin=0.008).point[0] == pytest.approx(0.05)
+    with pytest.raises(PushError, match="within 12 mm of the face's edge"):
+        rotation_push(box_surface, **along, edge_margin=0.012)
+
+
+def test_a_straddle_push_meets_the_palm_side_face_either_side_of_the_fingers_and_pushes_square_to_it():
+    from dmg_executor.push_points import ObjectSurface, PushError, straddle_push
+    from dmg_planner.objects import box_union_mesh, load_object
+
+    # The bracket's base plate (x -60..60, y -30..30, z 0..8 mm) held across its thickness, the fingers
+    # along +y with the grasp's middle 10.5 mm in from its -y edge: the tips straddle them on that edge.
+    plate = ObjectSurface(*box_union_mesh(load_object("bracket").parts))
+    middle, halves, limit = np.array([-0.0015, -0.0105, 0.004]), [0.02, 0.028], np.deg2rad(15.0)
+    push = straddle_push(plate, middle, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit, RULES.push.translation_slant)
+    assert push.point == pytest.approx([-0.0015, -0.03, 0.004], abs=1e-6) and push.spread == pytest.approx(0.04)
+    assert push.direction == pytest.approx([0.0, 1.0, 0.0]) and push.normal == pytest.approx([0.0, -1.0, 0.0], abs=1e-6)
+    # The plate turned 8 deg in the grip: the tips line up with its edge and push square onto it.
+    turn = np.deg2rad(8.0)
+    along, across = [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0]
+    turned = straddle_push(plate, middle, along, across, halves, limit, RULES.push.translation_slant)
+    assert turned.direction == pytest.approx([0.0, 1.0, 0.0], abs=1e-6) and turned.spread == pytest.approx(0.04 / np.cos(turn))
+    with pytest.raises(PushError, match="turned 20 deg from across the fingers"):
+        turn = np.deg2rad(20.0)
+        straddle_push(plate, middle, [-np.sin(turn), np.cos(turn), 0.0], [np.cos(turn), np.sin(turn), 0.0], halves, limit,
+                      RULES.push.translation_slant)
+    # 45 mm from its end, one tip would be beyond the plate at either spread.
+    with pytest.raises(PushError, match="40 mm apart: straddle push: the push line misses the object; 56 mm apart"):
+        straddle_push(plate, [-0.045, -0.0105, 0.004], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit,
+                      RULES.push.translation_slant)
