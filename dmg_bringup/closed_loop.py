@@ -44,10 +44,14 @@ class ClosedLoop:
         self.seen_covariance: np.ndarray | None = None
         self.next_frame = -math.inf
 
+    def forget(self) -> None:
+        """Forget earlier sightings and the frame schedule: a reset moved the object (and may have
+        restarted the clock)."""
+        self.seen, self.seen_time, self.seen_covariance, self.next_frame = None, -math.inf, None, -math.inf
+
     def watch(self, seconds: float) -> None:
-        """Forget earlier sightings (a reset moved the object), then let the cell run, arms still,
-        perceiving as it goes."""
-        self.seen, self.seen_time, self.next_frame = None, -math.inf, -math.inf
+        """Forget earlier sightings, then let the cell run, arms still, perceiving as it goes."""
+        self.forget()
         ends = self.cell.time + seconds
         while self.cell.time < ends:
             self.perceive()

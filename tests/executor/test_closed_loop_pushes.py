@@ -420,7 +420,7 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
         pose[:3, 3] = [x, 0.0, -0.0005]
         return pose
 
-    cell.reset("box", object_in_gripper=invert(grasp(0.0085, 90.0)))
+    cell.reset("box", object_in_gripper=invert(grasp(0.0085, 90.0)), restart_clock=True)
     loop.watch(0.5)
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
     planned = plan(graph, pose(invert(loop.seen)), pose(grasp(-0.0045, 135.0)))
@@ -565,7 +565,8 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     foot, top = np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 0.06])
     rotation = Primitive(PrimitiveKind.ROTATION, np.deg2rad(30.0), np.zeros(3), foot, foot, 0.0, np.deg2rad(30.0),
                          top, top, turned)
-    cell.reset("box")
+    cell.reset("box", restart_clock=True)
+    loop.forget()
     executor = PlanExecutor(ExecutorSettings.defaults(), surface, [rotation], 0, 1.0, cell.time)
     observed = loop.observe()
     executor.update(replace(observed, object_in_holder=invert(held), object_time=observed.time, opening=0.06,
@@ -687,7 +688,7 @@ def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(lo
     start[:3, :3], start[:3, 3] = Rotation.from_rotvec([np.pi / 4, 0.0, 0.0]).as_matrix(), [0.01, 0.005, -0.015]
     goal = start.copy()
     goal[:3, :3] = np.eye(3)
-    cell.reset("plug", object_in_gripper=invert(start))
+    cell.reset("plug", object_in_gripper=invert(start), restart_clock=True)
     loop.watch(0.5)
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
     planned = plan(graph, pose(invert(loop.seen)), pose(goal))
