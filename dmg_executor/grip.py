@@ -10,6 +10,8 @@ the object in the plane the primitives work in, and the pushes correct it.)
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 GRAVITY = np.array([0.0, 0.0, -9.81])   # m/s^2, base frame (z up)
@@ -26,3 +28,13 @@ def tilt_hold_force(object_in_holder: np.ndarray, holder_rotation: np.ndarray, c
     torque = np.cross(arm, weight)
     across = float(np.hypot(torque[1], torque[2]))
     return across / (friction * max(opening, NARROWEST_GRASP))
+
+
+def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_reach: float) -> float:
+    """Which way [rad, signed] the pusher should slide along the grasp axis x (holder frame) to turn a
+    pushed object's tilt `tilt` (rotation vector) back. Sliding drags the face along x by friction
+    F_x at the contact `lever` from the grasp axis; the self-centring grip answers with unequal
+    finger forces whose sliding friction adds (mu*h - L)*F_x about d x x in all, mu*h = `grip_reach`.
+    While the object slides, nothing else resists a turn about that axis."""
+    axis = np.cross(direction, [1.0, 0.0, 0.0])
+    return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)

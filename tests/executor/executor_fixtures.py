@@ -36,7 +36,7 @@ def loop_parts():
     cell.close()
 
 
-def _box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, **overrides):
+def box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, **overrides):
     """An executor for the plan from the box's default grasp (freshly reset, the clock at 0: a test runs
     the same whichever tests ran before it in the same cell) to goal_from_start(start)."""
     from scipy.spatial.transform import Rotation
@@ -55,16 +55,16 @@ def _box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, 
                         result.principal_finger, alpha, cell.time, loop.camera_model(), tags)
 
 
-def _translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, **overrides):
+def translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, **overrides):
     """An executor for a translation (15 mm) of the box's default grasp along the fingers, freshly reset."""
     def goal(start: np.ndarray) -> np.ndarray:
         moved = start.copy()
         moved[:3, 3] += length * start[:3, 2]
         return moved
-    return _box_executor(loop_parts, box_surface, goal, alpha, **overrides)
+    return box_executor(loop_parts, box_surface, goal, alpha, **overrides)
 
 
-def _rotation_executor(loop_parts, box_surface):
+def rotation_executor(loop_parts, box_surface):
     """An executor for a 30 deg rotation of the box's default grasp about its grasp axis, freshly reset."""
     from scipy.spatial.transform import Rotation
 
@@ -72,12 +72,12 @@ def _rotation_executor(loop_parts, box_surface):
         turned = start.copy()
         turned[:3, :3] = Rotation.from_rotvec(np.deg2rad(30.0) * start[:3, 0]).as_matrix() @ start[:3, :3]
         return turned
-    executor = _box_executor(loop_parts, box_surface, goal)
+    executor = box_executor(loop_parts, box_surface, goal)
     assert [p.kind.name for p in executor.primitives] == ["ROTATION"]
     return executor
 
 
-def _tick(loop, executor, pusher_stuck: bool = False) -> None:
+def control_tick(loop, executor, pusher_stuck: bool = False) -> None:
     """One control tick of the closed loop; `pusher_stuck`: the pushing arm ignores its command
     (a joint at its limit)."""
     loop.perceive()

@@ -7,10 +7,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from executor_fixtures import _tick, _translation_executor
-from executor_fixtures import box_surface, bracket_run, loop_parts  # noqa: F401
+from executor_fixtures import box_surface, bracket_run, control_tick, loop_parts, translation_executor  # noqa: F401
 
 pytestmark = pytest.mark.sim
+
+
+def in_phase(executor, phase) -> bool:
+    """Is the executor in EXECUTE, in this phase of the push (dmg_executor.states.execute.Phase)?"""
+    from dmg_executor.states.execute import Execute
+
+    return isinstance(executor.state, Execute) and executor.state.phase == phase
 
 
 def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_parts, box_surface):
@@ -18,7 +24,7 @@ def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_part
 
     cell, loop, _, _ = loop_parts
     # A workspace that holds both grippers where they are, but not the space under the object.
-    executor = _translation_executor(loop_parts, box_surface, workspace_min=[0.3, -0.5, 0.12])
+    executor = translation_executor(loop_parts, box_surface, workspace_min=[0.3, -0.5, 0.12])
     pusher_before = cell.grasp_pose("arm2")[:3, 3]
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.LIMIT_VIOLATION and "outside the workspace" in outcome.message
@@ -29,9 +35,9 @@ def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_part
 def _translation_under_way(loop_parts, box_surface):
     """A translation's executor 50 ticks into its run: the pusher has set off."""
     loop = loop_parts[1]
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     for _ in range(50):
-        _tick(loop, executor)
+        control_tick(loop, executor)
     return executor
 
 
@@ -69,7 +75,7 @@ def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loo
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, step_timeout=0.5)   # the approach needs seconds
+    executor = translation_executor(loop_parts, box_surface, step_timeout=0.5)   # the approach needs seconds
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.STEP_TIMEOUT and "APPROACH" in outcome.message
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
@@ -84,21 +90,24 @@ def test_a_pusher_whose_wrist_cannot_turn_on_the_way_goes_on_to_the_push_start(l
     the push is made (without the rule the push was given up, never again that way)."""
     from dmg_common.transforms import turn_between
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.approach import Homeward
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
+    run = executor.run
     passed_turned, ends = [], cell.time + 60
     while not executor.done and cell.time < ends:
         loop.perceive()
         observation = loop.observe()
-        before = executor.waypoint if executor.step.name == "APPROACH" else None
+        before = run.pilot.route.index if executor.step.name == "APPROACH" else None
         command = executor.update(observation)
-        on_the_way = (executor.step.name == "APPROACH" and executor.push is not None and not executor.push.homeward
-                      and executor.waypoint < len(executor.push.waypoints) - 1)
+        on_the_way = (executor.step.name == "APPROACH" and run.push is not None
+                      and not isinstance(executor.state, Homeward)
+                      and run.pilot.route.index < len(run.push.route.waypoints) - 1)
         if on_the_way:
             command.pusher[3:] = 0.0                 # fault: the wrist does not turn on the way
-        if before is not None and executor.step.name == "APPROACH" and executor.waypoint == before + 1:
-            passed_turned.append(turn_between(executor.push.orientations[before], observation.pusher[:3, :3]))
+        if before is not None and executor.step.name == "APPROACH" and run.pilot.route.index == before + 1:
+            passed_turned.append(turn_between(run.pilot.route.orientations[before], observation.pusher[:3, :3]))
         loop.apply(command)
         cell.run(loop.control_period)
     outcome = executor.result
@@ -111,7 +120,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     home = cell.grasp_pose("arm2")[:3, 3]
     while executor.step.name != "APPROACH" and not executor.done:
         loop.perceive()
@@ -131,7 +140,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
         loop.apply(command)
         cell.run(loop.control_period)
     assert any("given up" in note for note in executor.notes), executor.notes
-    assert len(executor.unreachable) == 1
+    assert len(executor.run.memory.unreachable) == 1
     # The box's only face square to this motion is the one it gave up: the primitive is left with a note,
     # the pusher back where it started, the grip held.
     outcome = loop.run(executor, time_limit=60)
@@ -144,6 +153,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
 def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket_run):
     from dmg_common.transforms import turn_between
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.holder_turn import HolderHome, TurnHolder
 
     cell, loop, make = bracket_run
     executor = make()
@@ -152,10 +162,11 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket
     while not executor.done and cell.time < ends:
         loop.perceive()
         command = executor.update(loop.observe())
-        turn = executor.holder_turn
-        if turn is not None and not turn.clearing and not turn.back:
+        state = executor.state          # the holder moving (the pusher clear), not turning back
+        if isinstance(state, HolderHome) or (isinstance(state, TurnHolder) and not state.back):
             stuck_from = cell.time if stuck_from is None else stuck_from
-            if abs(turn.turned) > np.deg2rad(30):     # fault: the holding wrist stops 30 deg into the turn
+            turned = state.turned if isinstance(state, TurnHolder) else 0.0
+            if abs(turned) > np.deg2rad(30):     # fault: the holding wrist stops 30 deg into the turn
                 command.holder[:] = 0.0
         loop.apply(command)
         cell.run(loop.control_period)
@@ -176,7 +187,7 @@ def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loo
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
 
     def tick(shift: float = 0.0) -> None:
         loop.perceive()
@@ -206,7 +217,7 @@ def test_a_held_object_seen_moved_is_a_slip_only_by_poses_certain_of_their_posit
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
 
     def tick(shift: float = 0.0, sigma: float | None = None) -> None:
         loop.perceive()
@@ -241,9 +252,10 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
     from scipy.spatial.transform import Rotation
 
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.execute import Phase
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     tilted = Rotation.from_rotvec([0.0, np.deg2rad(9.0), 0.0]).as_matrix()    # about holder y: off the grasp axis
 
     def tick(sigma_deg: float | None = None) -> None:
@@ -258,7 +270,7 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
 
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done:
+    while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and not executor.done:
         tick()
     for _ in range(3 * executor.settings.slip_poses):      # a lone tag seen obliquely: 4 deg uncertain
         tick(4.0)
@@ -277,18 +289,19 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
     push stops within a tick (grip to the hold force, a note) and the run goes on; 1 mm wider, it does not."""
     from dataclasses import replace
 
+    from dmg_executor.states.execute import Phase
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
-    deadline, widest = cell.time + 60.0, executor.widest_grasp
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
-        _tick(loop, executor)
-    assert executor.phase == "push", (executor.step, executor.result)
+    executor = translation_executor(loop_parts, box_surface)
+    deadline, widest = cell.time + 60.0, executor.run.campaign.widest_grasp
+    while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and cell.time < deadline:
+        control_tick(loop, executor)
+    assert in_phase(executor, Phase.PUSH), (executor.step, executor.result)
     loop.perceive()
     observation = loop.observe()
     spread = replace(observation, opening=max(observation.opening, widest) + widened)
     command = executor.update(spread)
-    assert (executor.phase == "tighten") is stops, (executor.phase, widest, observation.opening)
+    assert in_phase(executor, Phase.TIGHTEN) is stops, (executor.state, widest, observation.opening)
     noted = [note for note in executor.notes if "forced gripper 1's fingers" in note]
     if stops:
         assert executor.settings.monitors.forced_open < widened and command.holder_grip.max_force == executor.settings.hold_force
@@ -306,21 +319,22 @@ def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts
     after `slip_poses` in a row, see the test above), the push goes on."""
     from dataclasses import replace
 
+    from dmg_executor.states.execute import Phase
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     deadline = cell.time + 60.0
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
-        _tick(loop, executor)
-    assert executor.phase == "push", (executor.step, executor.result)
+    while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and cell.time < deadline:
+        control_tick(loop, executor)
+    assert in_phase(executor, Phase.PUSH), (executor.step, executor.result)
     assert np.rad2deg(executor.settings.monitors.push_tilt_stop * executor.settings.slip_angle) == pytest.approx(4.0)
     loop.perceive()
     observation = loop.observe()
-    tilted = executor.pushed_reference.copy()      # turned about gripper 1's y, through the object's origin
+    tilted = executor.run.pushed.reference.copy()      # turned about gripper 1's y, through the object's origin
     tilted[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ tilted[:3, :3]
     command = executor.update(replace(observation, object_in_holder=tilted, object_time=observation.time,
                                       object_covariance=None))
-    assert (executor.phase == "tighten") is stops, executor.phase
+    assert in_phase(executor, Phase.TIGHTEN) is stops, executor.state
     noted = [note for note in executor.notes if "tilted" in note and "stopped" in note]
     if stops:
         assert command.holder_grip.max_force == executor.settings.hold_force
@@ -335,22 +349,23 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     (a joint at its limit): after `stall_time` the run goes on from there, and ends there, with
     notes instead of waiting out the step's time limit."""
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.leave import ReturnHome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     while executor.step.name != "LEAVE" and not executor.done:
-        _tick(loop, executor)
+        control_tick(loop, executor)
     stuck_until = cell.time + executor.settings.stall_time + 1.0
     while cell.time < stuck_until and executor.step.name == "LEAVE":   # fault: the pushing arm does not move
-        _tick(loop, executor, pusher_stuck=True)
+        control_tick(loop, executor, pusher_stuck=True)
     assert executor.step.name != "LEAVE" and not executor.done, (executor.step, executor.result)
     assert any("stopped backing out" in note for note in executor.notes), executor.notes
     deadline = cell.time + 60.0
-    while not executor.returning and not executor.done and cell.time < deadline:
-        _tick(loop, executor)
+    while not isinstance(executor.state, ReturnHome) and not executor.done and cell.time < deadline:
+        control_tick(loop, executor)
     stuck_until = cell.time + executor.settings.stall_time + 1.0
     while cell.time < stuck_until and not executor.done:    # the same on the way home
-        _tick(loop, executor, pusher_stuck=True)
+        control_tick(loop, executor, pusher_stuck=True)
     assert executor.done, executor.step
     assert executor.result.outcome == Outcome.OK, executor.result.message
     assert "short of where it started" in executor.result.message
@@ -364,8 +379,10 @@ def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pos
 
     from scipy.spatial.transform import Rotation
 
+    from dmg_executor.states.execute import Phase
+
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     tilted = Rotation.from_rotvec([0.0, np.deg2rad(9.0), 0.0]).as_matrix()    # about holder y: off the grasp axis
     s = executor.settings
     deadline = cell.time + 60.0
@@ -384,12 +401,12 @@ def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pos
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
 
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and cell.time < deadline:
+    while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and cell.time < deadline:
         tick()
-    frozen = executor.last.object_time
+    frozen = executor.run.last.object_time
     while executor.step.name == "EXECUTE" and cell.time < deadline:     # pushed on, on dead reckoning
         tick(freeze=frozen)
-    assert executor.step.name == "LEAVE" and executor.held.reference is None, (executor.step, executor.result)
+    assert executor.step.name == "LEAVE" and executor.run.held.reference is None, (executor.step, executor.result)
     for _ in range(3 * s.slip_poses):
         tick(tilt=True)
     assert not executor.done, executor.result

@@ -8,12 +8,43 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dmg_executor.settings import ExecutorSettings
-from executor_fixtures import _rotation_executor, _tick, _translation_executor
-from executor_fixtures import box_surface, bracket_run, loop_parts  # noqa: F401
+from dmg_executor.states.execute import Execute, Phase
+from executor_fixtures import (  # noqa: F401
+    box_surface,
+    bracket_run,
+    control_tick,
+    loop_parts,
+    rotation_executor,
+    translation_executor,
+)
 
 RULES = ExecutorSettings.defaults()     # the shipped rules (config/executor.yaml)
 
 pytestmark = pytest.mark.sim
+
+
+def _pushing(executor) -> bool:
+    """Is the executor in EXECUTE's push phase (the pusher moving the object under P control)?"""
+    return isinstance(executor.state, Execute) and executor.state.phase == Phase.PUSH
+
+
+def _run_recording(loop, executor, time_limit: float, record):
+    """`loop.run(executor, time_limit)`, calling `record(observation)` after each executor update."""
+    cell = loop.cell
+    ends = cell.time + time_limit
+    while not executor.done:
+        loop.perceive()
+        observation = loop.observe()
+        if cell.time < ends:
+            command = executor.update(observation)
+            record(observation)
+        else:
+            command = executor.cancel(f"time limit {time_limit:.0f} s reached")
+        loop.apply(command)
+        cell.run(loop.control_period)
+    for role in ("arm1", "arm2"):
+        cell.stop(role)
+    return executor.result
 
 
 def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts, box_surface):
@@ -21,19 +52,16 @@ def test_alpha_zero_moves_only_the_holding_arm_and_reaches_the_target(loop_parts
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, alpha=0.0)
+    executor = translation_executor(loop_parts, box_surface, alpha=0.0)
     assert [p.kind.name for p in executor.primitives] == ["TRANSLATION"]
     holder_before, pusher_positions = cell.grasp_pose("arm1")[:3, 3], {}
-    original_update = executor.update
+    campaign = executor.run.campaign
 
-    def recording_update(observation):
-        command = original_update(observation)
+    def record(observation):
         if executor.step.name == "EXECUTE":      # per push
-            pusher_positions.setdefault((executor.index, executor.pushes), []).append(observation.pusher[:3, 3])
-        return command
+            pusher_positions.setdefault((campaign.index, campaign.pushes), []).append(observation.pusher[:3, 3])
 
-    executor.update = recording_update
-    outcome = loop.run(executor, time_limit=120)
+    outcome = _run_recording(loop, executor, 120, record)
     assert outcome.outcome == Outcome.OK, outcome.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
     assert pusher_positions
@@ -47,11 +75,12 @@ def _pushed_once(loop_parts, box_surface, length: float, headway: float, **overr
     leaves it (pushed once, its error down by `headway` since that push was planned); run until the
     executor ends or plans its next push. Returns the executor and the primitive's error it saw first."""
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, length=length, **overrides)
+    executor = translation_executor(loop_parts, box_surface, length=length, **overrides)
     loop.watch(0.5)
-    executor._measure(loop.observe())
-    seen = executor.errors[0]
-    executor.pushes, executor.error_before_push = 1, seen + headway
+    campaign = executor.run.campaign
+    campaign.measure(loop.observe())
+    seen = campaign.errors[0]
+    campaign.pushes, campaign.error_before_push = 1, seen + headway
     ends = cell.time + 30.0
     while not executor.done and executor.step.name != "APPROACH" and cell.time < ends:
         loop.perceive()
@@ -76,7 +105,8 @@ def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, b
     settled = [note for note in executor.notes if "settled" in note]
     if settles:
         assert executor.done and executor.result.outcome == Outcome.OK, executor.result
-        assert settled and len(executor.primitives) == executor.plan_length, (executor.notes, executor.primitives)
+        assert settled and len(executor.primitives) == executor.run.campaign.plan_length, (executor.notes,
+                                                                                            executor.primitives)
     else:
         assert not executor.done and executor.step.name == "APPROACH" and not settled, (executor.step, executor.notes)
 
@@ -102,17 +132,13 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     executor = make()
     holder_before = cell.grasp_pose("arm1")
     turned_while_pushing = []
-    original_update = executor.update
 
-    def recording_update(observation):
-        command = original_update(observation)
-        if executor.step.name == "EXECUTE" and executor.phase == "push":
+    def record(observation):
+        if executor.step.name == "EXECUTE" and _pushing(executor):
             turned_while_pushing.append(
                 turn_between(observation.holder[:3, :3], holder_before[:3, :3]))
-        return command
 
-    executor.update = recording_update
-    outcome = loop.run(executor, time_limit=150)
+    outcome = _run_recording(loop, executor, 150, record)
     assert outcome.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), outcome.message
     assert "far side" in outcome.message
     assert np.rad2deg(max(turned_while_pushing)) > 170            # pushed with the bracket turned half round ...
@@ -135,16 +161,12 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, -0.012))
     pushing_open = []
-    original_update = executor.update
 
-    def recording_update(observation):
-        command = original_update(observation)
-        if executor.step.name == "EXECUTE" and executor.phase == "push":
+    def record(observation):
+        if executor.step.name == "EXECUTE" and _pushing(executor):
             pushing_open.append(cell.gripper_status("arm2").opening)
-        return command
 
-    executor.update = recording_update
-    outcome = loop.run(executor, time_limit=150)
+    outcome = _run_recording(loop, executor, 150, record)
     assert outcome.outcome == Outcome.OK, outcome.message
     assert "for a push from its side" in outcome.message
     assert max(pushing_open) > 0.02                                        # pushed with the tips opened ...
@@ -170,7 +192,7 @@ def _pusher_in_the_bracket_corner(bracket_run):
     stopped = observation.pusher.copy()
     stopped[:3, 3] = apply(object_pose, np.array([0.037, 0.0, 0.025]))
     observation = replace(observation, pusher=stopped)
-    box = executor._keep_out(observation)
+    box = executor.run.keep_out(observation)
     inside = apply(invert(observation.holder), stopped[:3, 3])
     assert box.contains(inside)[0]
     assert np.min(np.concatenate([inside - box.low, box.high - inside])) > RULES.approach.escape_depth     # too deep to just step out
@@ -184,19 +206,24 @@ def test_a_pusher_deep_in_a_hollow_of_the_object_routes_out_the_way_its_push_cam
     object unseen on its way in) has no straight way out of the box that misses the object: its route
     anywhere first backs out along the line it came in on (before, RouteError: no route, the run ended)."""
     from dmg_common.transforms import apply, invert
-    from dmg_executor.controller import _Push
+    from dmg_executor.motion import Route
+    from dmg_executor.push_points import PushPoint
+    from dmg_executor.run import Push
 
     executor, observation, down = _pusher_in_the_bracket_corner(bracket_run)
+    run = executor.run
     corner, to_holder = observation.pusher[:3, 3], invert(observation.holder)
-    executor.push = _Push(observation.holder[:3, :3] @ down, down, corner, [corner], [observation.pusher[:3, :3]], 0.0)
-    executor._head_home(observation)
-    box = executor._keep_out(observation)
-    first = apply(to_holder, executor.push.waypoints[0])
+    onto_plate = PushPoint(np.array([0.037, 0.0, 0.008]), np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0]))
+    run.push = Push(observation.holder[:3, :3] @ down, down, corner, Route([corner], [observation.pusher[:3, :3]]), 0.0,
+                    onto_plate)
+    run.head_home(observation)
+    box = run.keep_out(observation)
+    first = apply(to_holder, run.pilot.route.waypoints[0])
     assert not box.contains(first)[0]
     backed = first - apply(to_holder, corner)
     assert np.linalg.norm(np.cross(backed, down)) < 1e-9 and float(backed @ down) < 0    # back up the line
-    home = executor._home_in(observation.holder)
-    assert np.linalg.norm(executor.push.waypoints[-1] - apply(observation.holder, box.nearest_outside(home))) < 1e-9
+    home = run.home_in(observation.holder)
+    assert np.linalg.norm(run.pilot.route.waypoints[-1] - apply(observation.holder, box.nearest_outside(home))) < 1e-9
 
 
 def test_a_holder_turn_the_pusher_has_no_route_out_of_the_way_of_is_forgone_not_the_run(bracket_run):
@@ -204,13 +231,17 @@ def test_a_holder_turn_the_pusher_has_no_route_out_of_the_way_of_is_forgone_not_
     begun is given up with a note and not tried again, the run goes on (before: LIMIT_VIOLATION); a turn
     back - the object turned away - cannot be given up: that ends the run LIMIT_VIOLATION, saying why."""
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.base import Transition
+    from dmg_executor.states.holder_turn import start_holder_turn
 
     executor, observation, _ = _pusher_in_the_bracket_corner(bracket_run)
-    executor.push = None
-    executor._start_holder_turn(observation, back=False)
-    assert not executor.done and executor.holder_turn is None and not executor.may_turn
+    executor.run.push = None
+    forgone = start_holder_turn(executor.run, observation, back=False)
+    assert isinstance(forgone, Transition), forgone
+    executor.state = forgone.to
+    assert not executor.done and not executor.state.turns_holder and not executor.run.holder_turns.may_turn
     assert any("did not turn the object: no route" in note for note in executor.notes), executor.notes
-    executor._start_holder_turn(observation, back=True)
+    start_holder_turn(executor.run, observation, back=True)
     assert executor.done and executor.result.outcome == Outcome.LIMIT_VIOLATION
     assert "before the holding gripper turns it back" in executor.result.message
 
@@ -223,6 +254,7 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     both tips), the push is taken."""
     from dmg_common.transforms import apply, invert
     from dmg_executor.fingertips import fingertip_shells, push_start
+    from dmg_executor.push_planning import push_from
     from dmg_executor.push_points import PushPoint
     from dmg_executor.routes import RouteError
     from dmg_executor.views import Occluders
@@ -233,22 +265,22 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     observation = loop.observe()
     executor.update(observation)
     object_pose = observation.holder @ observation.object_in_holder
-    occluders = Occluders.of(executor.shape, observation.holder, observation.opening)
-    radius, home = executor.settings.tip_radius, executor.pusher_home[:3, :3]
+    occluders = Occluders.of(executor.run.sight.shape, observation.holder, observation.opening)
+    radius, home = executor.settings.tip_radius, executor.run.pusher_home[:3, :3]
     normal, along = np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])      # the wall's inner face, pushed out
 
     def tip_inside(start, view) -> bool:
         shells = fingertip_shells(view, radius, executor.settings.fingertips.tip_clearance)
-        return bool(executor.surface.inside(apply(invert(object_pose), start + shells)).any())
+        return bool(executor.run.surface.inside(apply(invert(object_pose), start + shells)).any())
 
     low = np.array([0.052, 0.0, 0.008 + radius + 0.001])                      # 1 mm more than a tip over the plate
     start = push_start(apply(object_pose, low), object_pose[:3, :3] @ normal, object_pose[:3, :3] @ along, home,
                        radius, executor.settings.gap, executor.settings.fingertips, executor.settings.push.slant_limit)
     assert tip_inside(start, home)
     with pytest.raises(RouteError, match="would put a fingertip into the object however it is turned"):
-        executor._push_from(observation, PushPoint(low, normal, along), occluders)
-    planned, _ = executor._push_from(observation, PushPoint(low + [0.0, 0.0, 0.02], normal, along), occluders)
-    assert not tip_inside(planned.start, planned.orientations[-1])
+        push_from(executor.run, observation, PushPoint(low, normal, along), occluders)
+    planned, _ = push_from(executor.run, observation, PushPoint(low + [0.0, 0.0, 0.02], normal, along), occluders)
+    assert not tip_inside(planned.start, planned.route.orientations[-1])
 
 
 def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_grip_held(bracket_run):
@@ -267,7 +299,7 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, level_tilt_deg=0.0)
     outcome = loop.run(unleveled, time_limit=150)
     assert outcome.outcome == Outcome.OUT_OF_TOLERANCE and tilt(unleveled) > 3.0, (outcome.message, tilt(unleveled))
-    assert unleveled.level_index is None
+    assert unleveled.run.campaign.level_index is None
 
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
     pressed, grips, ends = [], [], cell.time + 150
@@ -275,7 +307,8 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
         loop.perceive()
         loop.apply(executor.update(loop.observe()))
         cell.run(loop.control_period)
-        if executor.index == executor.level_index and executor.step.name == "EXECUTE" and executor.phase == "push":
+        campaign = executor.run.campaign
+        if campaign.index == campaign.level_index and executor.step.name == "EXECUTE" and _pushing(executor):
             pressed.append(tilt(executor))
             grips.append(cell.gripper_status("arm1").max_force)
     outcome = executor.result
@@ -294,20 +327,22 @@ def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the
     mid-turn pose, the press was taken as done before it began)."""
     from dmg_common.transforms import invert
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.holder_turn import TurnHolder
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
+    campaign = executor.run.campaign
     turned, pressed, ends = False, False, cell.time + 150
     while not executor.done and cell.time < ends:
         loop.perceive()
-        turn = executor.holder_turn
-        if (executor.level_index is not None and turn is not None and not turn.clearing and loop.seen is not None
+        turn = executor.state
+        if (campaign.level_index is not None and isinstance(turn, TurnHolder) and loop.seen is not None
                 and abs(turn.angle - turn.turned) > np.deg2rad(20.0)):      # mid-turn
             level = loop.seen.copy()
             level[:3, :3] = invert(executor.primitives[-1].gripper_after)[:3, :3]
             loop.seen, loop.seen_time, turned = level, cell.time, True
         loop.apply(executor.update(loop.observe()))
-        pressed = pressed or (executor.index == executor.level_index and executor.step.name == "EXECUTE")
+        pressed = pressed or (campaign.index == campaign.level_index and executor.step.name == "EXECUTE")
         cell.run(loop.control_period)
     outcome = executor.result
     tilt = _grasp_axis_tilt_deg(cell, executor)
@@ -323,22 +358,28 @@ def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back
     once, when the bracket is level or the next press needs the holder as it was (before: it turned back
     after every press to judge it and turned again for the next, and ran out of time at 150 s)."""
     from dmg_executor.contract import Outcome
+    from dmg_executor.states.holder_turn import ClearForTurn, TurnHolder
 
     cell, loop, make = bracket_run
     executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=4.0, tilt_axis=(0.0, 0.92, 0.38))
+    campaign = executor.run.campaign
+
+    def turning_back(state) -> bool:      # (the holder going back to where it started turns nothing back)
+        return state.move.back if isinstance(state, ClearForTurn) else isinstance(state, TurnHolder) and state.back
+
     events, turning, pressing, ends = [], False, False, cell.time + 150
     while not executor.done and cell.time < ends:
         loop.perceive()
         loop.apply(executor.update(loop.observe()))
         cell.run(loop.control_period)
-        if executor.index != executor.level_index:
+        if campaign.index != campaign.level_index:
             continue
-        now_turning = executor.holder_turn is not None
-        now_pressing = executor.step.name == "EXECUTE" and executor.phase == "push"
+        now_turning = executor.state.turns_holder
+        now_pressing = executor.step.name == "EXECUTE" and _pushing(executor)
         if now_turning and not turning:
-            events.append("back" if executor.holder_turn.back else "turn")
+            events.append("back" if turning_back(executor.state) else "turn")
         if now_pressing and not pressing:
-            events.append("press, turned" if executor.far_side else "press")
+            events.append("press, turned" if executor.run.holder_turns.far_side else "press")
         turning, pressing = now_turning, now_pressing
     outcome = executor.result
     tilt = _grasp_axis_tilt_deg(cell, executor)
@@ -360,17 +401,18 @@ def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_toleranc
     from dmg_common.transforms import invert
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, length=0.005)
+    executor = translation_executor(loop_parts, box_surface, length=0.005)
     assert executor.settings.level.pushes == 2 and executor.settings.campaign.settled_share * executor.settings.goal_angle_tolerance == pytest.approx(np.deg2rad(2.4))
+    campaign = executor.run.campaign
     executor.primitives.append(replace(executor.primitives[-1]))      # the level press after the plan
-    executor.index = executor.level_index = len(executor.primitives) - 1
-    executor.level_began, executor.pushes = np.deg2rad(tilt_deg + 1.0), presses
+    campaign.index = campaign.level_index = len(executor.primitives) - 1
+    campaign.level_began, campaign.pushes = np.deg2rad(tilt_deg + 1.0), presses
     tilted = invert(executor.primitives[-1].gripper_after)           # the goal's grasp, its axis tilted about y
     tilted[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ tilted[:3, :3]
     loop.perceive()
     observation = replace(loop.observe(), object_in_holder=tilted, object_time=cell.time)
-    assert np.rad2deg(executor._error_and_tolerance(observation)[0]) == pytest.approx(tilt_deg, abs=0.01)
-    assert executor._primitive_finished(observation) is finished
+    assert np.rad2deg(campaign.error_and_tolerance(observation)[0]) == pytest.approx(tilt_deg, abs=0.01)
+    assert campaign.finished(observation) is finished
 
 
 def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
@@ -378,17 +420,18 @@ def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_
     the pusher 300 mm up along gripper 1's hand and arm (sim: 12 s with the object unseen, then
     OBJECT_LOST): refused, while one across the fingers from the same grasp is routed."""
     from dmg_common.transforms import invert
+    from dmg_executor.push_planning import push_from
     from dmg_executor.push_points import PushPoint
     from dmg_executor.routes import RouteError
     from dmg_executor.views import Occluders
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     loop.watch(0.5)
     obs = loop.observe()
     executor.update(obs)
     holder_in_object = invert(obs.object_in_holder)
-    middle, occluders = holder_in_object[:3, 3], Occluders.of(executor.shape, obs.holder, obs.opening)
+    middle, occluders = holder_in_object[:3, 3], Occluders.of(executor.run.sight.shape, obs.holder, obs.opening)
 
     def push_towards(holder_direction: np.ndarray) -> PushPoint:    # the object pushed that way (holder frame)
         direction = holder_in_object[:3, :3] @ holder_direction
@@ -396,8 +439,8 @@ def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_
         return PushPoint(point, normal, direction)
 
     with pytest.raises(RouteError, match="from its palm side"):
-        executor._push_from(obs, push_towards(np.array([0.0, 0.0, 1.0])), occluders)   # out towards the fingertips
-    across, _ = executor._push_from(obs, push_towards(np.array([0.0, 1.0, 0.0])), occluders)
+        push_from(executor.run, obs, push_towards(np.array([0.0, 0.0, 1.0])), occluders)   # out towards the fingertips
+    across, _ = push_from(executor.run, obs, push_towards(np.array([0.0, 1.0, 0.0])), occluders)
     assert np.linalg.norm(across.start - obs.holder[:3, 3]) < 0.1      # starts beside the grasp, not 300 mm off
 
 
@@ -410,6 +453,7 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     from dmg_common.transforms import distance, invert
     from dmg_executor.controller import PlanExecutor
     from dmg_executor.settings import ExecutorSettings
+    from dmg_executor.states.holder_turn import HolderHome
     from dmg_planner.search import GripperPose, plan
 
     cell, loop, graph, tags = loop_parts
@@ -427,15 +471,15 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     assert [p.kind.name for p in planned.primitives] == ["ROTATION", "TRANSLATION"]
     executor = PlanExecutor(ExecutorSettings.defaults(), box_surface, planned.primitives, planned.principal_finger,
                             0.0, cell.time, loop.camera_model(), tags)
+    campaign = executor.run.campaign
     holder_start, going_back, back = cell.grasp_pose("arm1"), None, None
     ends = cell.time + 90.0
-    while not executor.done and cell.time < ends and not (back is not None and executor.index == 1
+    while not executor.done and cell.time < ends and not (back is not None and campaign.index == 1
                                                           and executor.step.name == "EXECUTE"):
-        _tick(loop, executor)
-        turn = executor.holder_turn
-        if turn is not None and turn.home is not None and not turn.clearing and going_back is None:
+        control_tick(loop, executor)
+        if isinstance(executor.state, HolderHome) and going_back is None:     # the pusher clear, the holder going back
             going_back = (cell.grasp_pose("arm1"), cell.object_in_gripper("arm1"))
-        if going_back is not None and back is None and turn is None:
+        if going_back is not None and back is None and not executor.state.turns_holder:
             back = (cell.grasp_pose("arm1"), cell.object_in_gripper("arm1"))
     assert going_back is not None and back is not None, executor.notes
     assert any("went back to where it started" in note for note in executor.notes), executor.notes
@@ -445,7 +489,7 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     assert returned[0] < 0.005 and np.rad2deg(returned[1]) < 5.0  # ... it went back ...
     held = distance(back[1], going_back[1])
     assert held[0] < 0.002 and np.rad2deg(held[1]) < 2.0          # ... with the box as it held it
-    assert not executor.done and executor.index == 1 and executor.step.name == "EXECUTE"   # and pushes from there
+    assert not executor.done and campaign.index == 1 and executor.step.name == "EXECUTE"   # and pushes from there
     assert not any("no safe push" in note for note in executor.notes), executor.notes
 
 
@@ -456,22 +500,22 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     from dataclasses import replace
 
     from dmg_common.transforms import invert
-    from dmg_executor.controller import _turned_since
+    from dmg_executor.campaign import turned_since
 
     cell, loop, _, _ = loop_parts
-    executor = _rotation_executor(loop_parts, box_surface)
+    executor = rotation_executor(loop_parts, box_surface)
     deadline, stuck, stuck_at = cell.time + 60.0, None, 0.0
 
     def pusher_turned() -> float:
-        return abs(_turned_since(executor.pushed_from, invert(cell.grasp_pose("arm1")) @ cell.grasp_pose("arm2")))
+        return abs(turned_since(executor.run.pushed.pusher, invert(cell.grasp_pose("arm1")) @ cell.grasp_pose("arm2")))
 
     while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
         loop.perceive()
         observation = loop.observe()
         if stuck is not None:      # seen, freshly, where it stuck
             observation = replace(observation, object_in_holder=stuck, object_time=observation.time)
-        elif (executor.step.name == "EXECUTE" and executor.pushed_reference is not None
-              and abs(_turned_since(executor.pushed_reference, observation.object_in_holder)) > np.deg2rad(2.0)):
+        elif (executor.step.name == "EXECUTE" and executor.run.pushed is not None
+              and abs(turned_since(executor.run.pushed.reference, observation.object_in_holder)) > np.deg2rad(2.0)):
             stuck, stuck_at = observation.object_in_holder.copy(), pusher_turned()
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
@@ -489,25 +533,27 @@ def test_a_push_that_meets_the_object_before_the_gap_is_closed_stops_closing_it(
     pose is 5 mm short along the push once it is planned: it stops at the start 1 mm from the face, not 6."""
     from dataclasses import replace
 
-    from dmg_executor.controller import _slid_since
+    from dmg_executor.campaign import slid_since
 
     cell, loop, _, _ = loop_parts
-    executor = _rotation_executor(loop_parts, box_surface)
+    executor = rotation_executor(loop_parts, box_surface)
     deadline, began = cell.time + 60.0, None
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done \
+    while not (executor.step.name == "EXECUTE" and _pushing(executor)) and not executor.done \
             and cell.time < deadline:
         loop.perceive()
         observation = loop.observe()
-        if executor.push is not None and executor.step.name != "FIND_CONTACT":
+        push = executor.run.push      # (None while the pusher is routed elsewhere: no push to be short along)
+        if push is not None and executor.step.name != "FIND_CONTACT":
             pusher = observation.pusher.copy()
-            pusher[:3, 3] -= 0.005 * executor.push.direction
+            pusher[:3, 3] -= 0.005 * push.direction
             observation = replace(observation, pusher=pusher)
-        if executor.step.name == "EXECUTE" and executor.phase == "touch" and began is None:
+        if (executor.step.name == "EXECUTE" and isinstance(executor.state, Execute)
+                and executor.state.phase == Phase.TOUCH and began is None):
             began = cell.object_in_gripper("arm1")
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
-    assert began is not None and executor.phase == "push", (executor.step, executor.result)
-    slid = _slid_since(began, cell.object_in_gripper("arm1"))
+    assert began is not None and _pushing(executor), (executor.step, executor.result)
+    slid = slid_since(began, cell.object_in_gripper("arm1"))
     assert slid < 0.003, slid      # without the rule the pusher goes on the whole gap: 5 mm into the face
 
 
@@ -518,20 +564,20 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
     from dataclasses import replace
 
     from dmg_common.transforms import invert
-    from dmg_executor.controller import _slid_since
+    from dmg_executor.campaign import slid_since
 
     cell, loop, _, _ = loop_parts
-    executor = _rotation_executor(loop_parts, box_surface)
+    executor = rotation_executor(loop_parts, box_surface)
     deadline, slid, touched = cell.time + 60.0, 0.0, None
     while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
         loop.perceive()
         observation = loop.observe()
-        if executor.step.name == "EXECUTE" and executor.phase == "push":
+        if executor.step.name == "EXECUTE" and _pushing(executor):
             pusher = (invert(observation.holder) @ observation.pusher)[:3, 3]
             touched = pusher if touched is None else touched
-            shoved = executor.pushed_reference.copy()
+            shoved = executor.run.pushed.reference.copy()
             shoved[:3, 3] += pusher - touched    # along with the pusher from where it met the object, unturned
-            slid = _slid_since(executor.pushed_reference, shoved)
+            slid = slid_since(executor.run.pushed.reference, shoved)
             observation = replace(observation, object_in_holder=shoved, object_time=observation.time)
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
@@ -571,8 +617,8 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     observed = loop.observe()
     executor.update(replace(observed, object_in_holder=invert(held), object_time=observed.time, opening=0.06,
                             object_covariance=None))
-    assert executor.push is not None, executor.result
-    push = executor.push.contact
+    assert executor.run.push is not None, executor.result
+    push = executor.run.push.contact
     assert push.point[2] > 0.04 + 1e-6, push.point          # on the bar
     in_holder = apply(invert(held), push.point)           # across the fingers, the full lever beyond the tips
     assert abs(push.direction @ [0.0, 1.0, 0.0]) > 0.99 and in_holder[2] == pytest.approx(
@@ -587,28 +633,30 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     from dataclasses import replace
 
     from dmg_common.transforms import invert
-    from dmg_executor.controller import _turned_since
+    from dmg_executor.campaign import turned_since
 
     cell, loop, _, _ = loop_parts
-    executor = _rotation_executor(loop_parts, box_surface)
-    deadline, pusher_turned = cell.time + 60.0, 0.0
+    executor = rotation_executor(loop_parts, box_surface)
+    deadline, pusher_turned, pushing = cell.time + 60.0, 0.0, None
     while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
         loop.perceive()
         observation = loop.observe()
-        if executor.step.name == "EXECUTE" and executor.phase == "push":     # seen, freshly, where it was
-            observation = replace(observation, object_in_holder=executor.pushed_reference, object_time=observation.time)
-            pusher_turned = abs(_turned_since(executor.pushed_from, invert(observation.holder) @ observation.pusher))
+        if executor.step.name == "EXECUTE" and _pushing(executor):     # seen, freshly, where it was
+            pushing, pushed = executor.state, executor.run.pushed
+            observation = replace(observation, object_in_holder=pushed.reference, object_time=observation.time)
+            pusher_turned = abs(turned_since(pushed.pusher, invert(observation.holder) @ observation.pusher))
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("missed the object" in note for note in executor.notes), executor.notes
-    limit = executor.settings.push.missed_turn + executor.sweep_to_face
-    assert executor.sweep_to_face < np.deg2rad(5.0)
-    assert limit < pusher_turned < limit + np.deg2rad(1.0), np.rad2deg([pusher_turned, executor.sweep_to_face])
-    missed = executor.missed[0]
+    sweep_to_face = pushing.sweep_to_face        # (as the push, now over, saw it)
+    limit = executor.settings.push.missed_turn + sweep_to_face
+    assert sweep_to_face < np.deg2rad(5.0)
+    assert limit < pusher_turned < limit + np.deg2rad(1.0), np.rad2deg([pusher_turned, sweep_to_face])
+    missed = executor.run.memory.missed[0]
     while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
-        _tick(loop, executor)
-    following = executor.push.contact
+        control_tick(loop, executor)
+    following = None if executor.run.push is None else executor.run.push.contact    # (None: the pusher sent home)
     assert following is not None and not (np.linalg.norm(following.point - missed.point) < executor.settings.push.missed_near_distance
                                           and following.direction @ missed.direction > np.cos(executor.settings.push.missed_near))
 
@@ -697,14 +745,15 @@ def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(lo
                             cell.time, loop.camera_model(), tags)
     slants = []      # how far each push's face is slanted from the push [deg]
     ends = cell.time + 60.0
-    while executor.index == 0 and not executor.done and cell.time < ends:     # the rotation (corrections follow)
+    campaign = executor.run.campaign
+    while campaign.index == 0 and not executor.done and cell.time < ends:     # the rotation (corrections follow)
         loop.perceive()
         loop.apply(executor.update(loop.observe()))
         cell.run(loop.control_period)
-        if executor.step.name == "EXECUTE" and (not slants or slants[-1][0] != executor.pushes):
-            push = executor.push.contact
-            slants.append((executor.pushes, np.rad2deg(np.arccos(-push.normal @ push.direction))))
-    assert executor.index == 1 and not any("left" in note for note in executor.notes), (executor.notes, executor.result)
+        if executor.step.name == "EXECUTE" and (not slants or slants[-1][0] != campaign.pushes):
+            push = executor.run.push.contact
+            slants.append((campaign.pushes, np.rad2deg(np.arccos(-push.normal @ push.direction))))
+    assert campaign.index == 1 and not any("left" in note for note in executor.notes), (executor.notes, executor.result)
     assert slants and max(slant for _, slant in slants) < 10.0, slants     # square onto the face
     turned = executor.primitives[0].gripper_after
     turned_off = turn_between(invert(cell.object_in_gripper("arm1"))[:3, :3], turned[:3, :3])

@@ -6,10 +6,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from executor_fixtures import _rotation_executor, _translation_executor
-from executor_fixtures import box_surface, loop_parts  # noqa: F401
+from dmg_executor.states.execute import Execute, Phase
+from dmg_executor.states.leave import ReturnHome
+from dmg_executor.states.look import Look, fruitless, vantage_places
+from executor_fixtures import box_surface, loop_parts, rotation_executor, translation_executor  # noqa: F401
 
 pytestmark = pytest.mark.sim
+
+
+def _pushing(executor) -> bool:
+    """Is the executor in the push phase of EXECUTE?"""
+    return isinstance(executor.state, Execute) and executor.state.phase == Phase.PUSH
+
+
+def _look(executor) -> Look | None:
+    """The look under way (the executor's current state), or None."""
+    return executor.state if isinstance(executor.state, Look) else None
 
 
 def _half_a_second_into_the_push(loop, executor):
@@ -21,7 +33,7 @@ def _half_a_second_into_the_push(loop, executor):
         loop.apply(executor.update(loop.observe()))
         loop.cell.run(loop.control_period)
 
-    while not (executor.step.name == "EXECUTE" and executor.phase == "push") and not executor.done:
+    while not (executor.step.name == "EXECUTE" and _pushing(executor)) and not executor.done:
         tick()
     for _ in range(25):
         tick()
@@ -34,13 +46,14 @@ def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_a
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, blind_pushes=False)
+    executor = translation_executor(loop_parts, box_surface, blind_pushes=False)
     tick = _half_a_second_into_the_push(loop, executor)
     pushing_from = cell.object_in_gripper("arm1")
     covered_until = cell.time + 1.5 * executor.settings.stale_after
     while cell.time < covered_until:             # the camera sees nothing (a lens cap)
         tick(perceive=False)
-    assert not executor.done and executor.step.name != "EXECUTE" or executor.phase == "tighten"
+    assert not executor.done and executor.step.name != "EXECUTE" or (
+        isinstance(executor.state, Execute) and executor.state.phase == Phase.TIGHTEN)
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
     held = cell.object_in_gripper("arm1")
     assert distance(pushing_from, held)[0] < 0.012       # it stopped pushing within the stale limit
@@ -56,7 +69,7 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, stale_after=0.3)    # less than the leave takes
+    executor = translation_executor(loop_parts, box_surface, stale_after=0.3)    # less than the leave takes
     tick = _half_a_second_into_the_push(loop, executor)
     while executor.step.name != "LEAVE" and not executor.done:
         tick()
@@ -67,8 +80,9 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
     observation = loop.observe()
     assert observation.time - observation.object_time > executor.settings.stale_after     # its pose is stale
     assert not executor.done, executor.result
-    assert executor.looking is None and (executor.step.name == "APPROACH" or executor.returning), executor.step
-    assert executor.held.reference is not None
+    assert _look(executor) is None and (executor.step.name == "APPROACH" or isinstance(executor.state, ReturnHome)), \
+        executor.state
+    assert executor.run.held.reference is not None
     outcome = loop.run(executor, time_limit=120)
     assert outcome.outcome == Outcome.OK, outcome.message
 
@@ -78,15 +92,15 @@ def test_a_push_that_loses_sight_of_the_object_goes_on_by_dead_reckoning_and_is_
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     tick = _half_a_second_into_the_push(loop, executor)
     pushing_from = cell.object_in_gripper("arm1")
-    while executor.step.name == "EXECUTE" and executor.phase == "push" and not executor.done:
+    while executor.step.name == "EXECUTE" and _pushing(executor) and not executor.done:
         tick(perceive=False)                     # the camera sees nothing (a lens cap) until the push ends
     assert not executor.done, executor.result
     pushed_to = cell.object_in_gripper("arm1")
     assert distance(pushing_from, pushed_to)[0] > 0.008                   # the push went on unseen ...
-    believed = executor.reckoned
+    believed = executor.run.reckoned
     assert believed is not None
     moved, turned = distance(believed, pushed_to)
     assert moved < 0.003 and np.rad2deg(turned) < 3.0, (moved, np.rad2deg(turned))   # ... and knew where it went
@@ -105,15 +119,15 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
 
     cell, loop, _, _ = loop_parts
     for comes_back in (True, False):
-        executor = _translation_executor(loop_parts, box_surface)
+        executor = translation_executor(loop_parts, box_surface)
         tick = _half_a_second_into_the_push(loop, executor)
         ends = cell.time + 120
         while not executor.done and cell.time < ends and not (
-                comes_back and executor.looking is not None and executor.looking.travelling):
+                comes_back and _look(executor) is not None and _look(executor).travelling):
             tick(perceive=False)
         if comes_back:
             assert not executor.done, executor.result
-            assert executor.looking.gone_to == 1 and executor.step.name == "FIND_CONTACT"
+            assert _look(executor).gone_to == 1 and executor.step.name == "FIND_CONTACT"
             outcome = loop.run(executor, time_limit=120)
             assert outcome.outcome == Outcome.OK, outcome.message
             assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
@@ -122,7 +136,8 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
             outcome = executor.result
             assert outcome.outcome == Outcome.OBJECT_LOST, outcome.message
             assert "vantage place" in outcome.message and "gripper 1 closed" in outcome.message, outcome.message
-            assert 1 <= executor.looking.gone_to <= executor.settings.look.places
+            assert isinstance(executor.state, Look), executor.state
+            assert 1 <= executor.state.gone_to <= executor.settings.look.places
             loop.apply(executor.update(loop.observe()))
             cell.run(0.5)
             assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
@@ -139,33 +154,36 @@ def test_places_a_look_saw_nothing_from_are_looked_from_last_in_the_runs_later_l
     from dmg_common.transforms import apply
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     tick = _half_a_second_into_the_push(loop, executor)
     ends = cell.time + 120
-    while not executor.done and cell.time < ends and not (executor.looking is not None and executor.looking.gone_to == 2):
+    while not executor.done and cell.time < ends and not (_look(executor) is not None and _look(executor).gone_to == 2):
         tick(perceive=False)
-    assert not executor.done and executor.looking is not None, executor.result
-    assert len(executor.fruitless) == 2, executor.fruitless
+    assert not executor.done and _look(executor) is not None, executor.result
+    run = executor.run
+    assert len(run.fruitless) == 2, run.fruitless
     obs = loop.observe()
 
     def standing_at(remembered: int):
         """The observation with the pusher at the `remembered`-th place the look saw nothing from."""
         pusher = obs.pusher.copy()
-        pusher[:3, 3] = apply(obs.holder, executor.fruitless[remembered])
+        pusher[:3, 3] = apply(obs.holder, run.fruitless[remembered])
         return replace(obs, pusher=pusher)
 
     # From where it stood, the vantage place it saw nothing from is the last to go to.
-    places = [place for place, _ in executor._vantage_places(standing_at(0))]
-    remembered = [executor._fruitless(obs, place) for place in places]
+    places = [place for place, _ in vantage_places(run, standing_at(0))]
+    remembered = [fruitless(run, obs, place) for place in places]
     assert remembered[-1] and not remembered[0] and remembered == sorted(remembered), remembered
     # A look begun at a place it saw nothing from heads straight for a vantage place.
     there = standing_at(0)
     for remember in (True, False):
-        executor.looking = None
-        kept, executor.fruitless = executor.fruitless, executor.fruitless if remember else []
-        executor._look_around(there)
-        assert executor.looking.travelling == remember, (remember, executor.looking)
-        executor.fruitless = kept
+        executor.state = Look()      # a look begun afresh, ticked once there
+        kept, run.fruitless = run.fruitless, run.fruitless if remember else []
+        executor.update(there)
+        assert not executor.done, executor.result
+        look = _look(executor)
+        assert look is not None and look.travelling == remember, (remember, executor.state, vars(executor.state))
+        run.fruitless = kept
 
 
 def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface, **overrides) -> tuple[float, int]:
@@ -173,12 +191,12 @@ def _search_with_a_wrist_that_does_not_turn(loop_parts, box_surface, **overrides
     does not turn (its wrist at a limit). Returns the search's sim seconds until the run ended and
     how many views were given up on the way."""
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, **overrides)
+    executor = translation_executor(loop_parts, box_surface, **overrides)
     _half_a_second_into_the_push(loop, executor)
     began, given_up, views, place = None, 0, None, None
     while not executor.done and cell.time < 600.0:
         command = executor.update(loop.observe())
-        look = executor.looking
+        look = _look(executor)
         if look is not None:
             began = cell.time if began is None else began
             command.pusher[3:] = 0.0
@@ -210,13 +228,13 @@ def test_a_held_object_lost_from_view_on_the_way_to_a_push_is_looked_for_not_giv
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, stale_after_held=3.0)
+    executor = translation_executor(loop_parts, box_surface, stale_after_held=3.0)
     tick = lambda perceive=True: (perceive and loop.perceive(), loop.apply(executor.update(loop.observe())),   # noqa: E731
                                   cell.run(loop.control_period))
     while executor.step.name != "APPROACH" and not executor.done:
         tick()
     capped = cell.time
-    while executor.looking is None and not executor.done and cell.time < capped + 20.0:
+    while _look(executor) is None and not executor.done and cell.time < capped + 20.0:
         tick(perceive=False)
     assert not executor.done, executor.result
     assert executor.step.name == "FIND_CONTACT" and cell.time - capped >= 3.0, (executor.step, cell.time - capped)
@@ -233,24 +251,24 @@ def test_a_blind_push_is_judged_short_only_by_a_pose_certain_of_its_position(loo
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     tick = _half_a_second_into_the_push(loop, executor)
-    while executor.step.name == "EXECUTE" and executor.phase == "push" and not executor.done:
+    while executor.step.name == "EXECUTE" and _pushing(executor) and not executor.done:
         tick(perceive=False)                     # the push goes on unseen
-    assert executor.reckoned is not None and not executor.done, executor.result
+    assert executor.run.reckoned is not None and not executor.done, executor.result
     # Then a lone tag seen obliquely: poses that show the box where it was before the push (as if the
     # push had not reached it), their position sigma 4 mm.
     doubtful = np.diag([0.004 ** 2] * 3 + [np.deg2rad(2.0) ** 2] * 3)
-    unpushed = executor.pushed_reference.copy()
+    unpushed = executor.run.pushed.reference.copy()
     for _ in range(5):
         obs = loop.observe()
         loop.apply(executor.update(replace(obs, object_in_holder=unpushed, object_time=obs.time, object_covariance=doubtful)))
         cell.run(loop.control_period)
-    assert executor.reckoned is None                                       # seen again ...
+    assert executor.run.reckoned is None                                   # seen again ...
     assert not any("did not reach" in note for note in executor.notes), executor.notes   # ... but not judged by it
     outcome = loop.run(executor, time_limit=120)
     assert outcome.outcome == Outcome.OK, outcome.message
-    assert not executor.shortfalls
+    assert not executor.run.memory.shortfalls
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
 
 
@@ -262,7 +280,7 @@ def _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surfac
     from dmg_common.transforms import invert
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, length=0.004)
+    executor = translation_executor(loop_parts, box_surface, length=0.004)
     along_fingers = executor.primitives[0].gripper_after[:3, 3] - invert(cell.object_in_gripper("arm1"))[:3, 3]
     along_fingers /= np.linalg.norm(along_fingers)      # the object moves opposite to the grasp on it, towards the palm
     pushes = []
@@ -278,8 +296,9 @@ def _blind_pushes_planned_from_poses_short_along_the_push(loop_parts, box_surfac
             biased = obs.object_in_holder.copy()
             biased[:3, 3] += bias * (obs.object_in_holder[:3, :3] @ along_fingers)
             obs = replace(obs, object_in_holder=biased)
-        if executor.step.name == "EXECUTE" and executor.phase == "push" and (not pushes or pushes[-1][0] != executor.pushes):
-            pushes.append((executor.pushes, cell.object_in_gripper("arm1")))
+        campaign = executor.run.campaign
+        if executor.step.name == "EXECUTE" and _pushing(executor) and (not pushes or pushes[-1][0] != campaign.pushes):
+            pushes.append((campaign.pushes, cell.object_in_gripper("arm1")))
         loop.apply(executor.update(obs))
         cell.run(loop.control_period)
     assert executor.done, "still pushing after 150 s"
@@ -328,7 +347,7 @@ def test_a_held_objects_pose_is_the_mean_of_the_certain_poses_seen_since_the_gri
     from dataclasses import replace
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface, reference_poses=reference_poses)
+    executor = translation_executor(loop_parts, box_surface, reference_poses=reference_poses)
 
     def tick(jitter: float, sigma: float) -> float:
         """One tick on a fresh pose seen `jitter` off along the push (holder z), `sigma` uncertain; the contact error."""
@@ -371,22 +390,23 @@ def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_w
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     certain = np.diag([0.0002, 0.0002, 0.0002, 0.002, 0.002, 0.002]) ** 2
     uncertain = np.diag([uncertain_mm / 1000] * 3 + [0.002] * 3) ** 2
     sought, pushed, ends, dwells = False, False, cell.time + 150.0, []
     while not executor.done and cell.time < ends:
         loop.perceive()
         observation = loop.observe()
-        looking_elsewhere = certain_elsewhere and executor.seeking_certain
+        search = executor.run.search
+        looking_elsewhere = certain_elsewhere and search.seeking_certain
         pushed = pushed or executor.step.name == "EXECUTE"
         covariance = uncertain if pushed and not looking_elsewhere else certain
-        look = executor.looking
-        since = None if look is None or not executor.seeking_certain else look.since
+        look = _look(executor)
+        since = None if look is None or not search.seeking_certain else look.since
         loop.apply(executor.update(replace(observation, object_covariance=covariance)))
-        if since is not None and executor.looking is look and look.since is None:    # left that view
+        if since is not None and executor.state is look and look.since is None:    # left that view
             dwells.append(cell.time - since)
-        sought = sought or executor.seeking_certain
+        sought = sought or search.seeking_certain
         cell.run(loop.control_period)
     result = executor.result
     assert result is not None and sought, result
@@ -406,7 +426,7 @@ def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_pose
     from dmg_common.transforms import distance
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
     certain = np.diag([0.0002, 0.0002, 0.0002, 0.002, 0.002, 0.002]) ** 2
 
     def tick(offset: float) -> None:
@@ -420,12 +440,12 @@ def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_pose
 
     while executor.step.name != "APPROACH" and not executor.done:
         tick(0.006)
-    assert len(executor.held.poses) == 1
+    assert len(executor.run.held.poses) == 1
     for _ in range(3 * executor.settings.slip_poses):
         tick(0.0)
     assert not executor.done, executor.result
     assert any("a stray pose, the reference taken again" in note for note in executor.notes), executor.notes
-    assert distance(executor.held.reference, cell.object_in_gripper("arm1"))[0] < 0.001
+    assert distance(executor.run.held.reference, cell.object_in_gripper("arm1"))[0] < 0.001
 
 
 def test_a_rotation_is_not_pushed_from_where_the_camera_would_see_no_tag(loop_parts, box_surface):
@@ -440,9 +460,10 @@ def test_a_rotation_is_not_pushed_from_where_the_camera_would_see_no_tag(loop_pa
 
     cell, loop, _, _ = loop_parts
     backwards = np.diag([1.0, -1.0, -1.0, 1.0])      # the optical axis turned round
-    for make, outcome in ((_translation_executor, Outcome.OK), (_rotation_executor, Outcome.OUT_OF_TOLERANCE)):
+    for make, outcome in ((translation_executor, Outcome.OK), (rotation_executor, Outcome.OUT_OF_TOLERANCE)):
         executor = make(loop_parts, box_surface)
-        executor.camera = replace(executor.camera, in_pusher=executor.camera.in_pusher @ backwards)
+        sight = executor.run.sight
+        sight.camera = replace(sight.camera, in_pusher=sight.camera.in_pusher @ backwards)
         start = cell.object_in_gripper("arm1")
         result = loop.run(executor, time_limit=90)
         assert result.outcome == outcome, result.message
@@ -458,7 +479,7 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = _translation_executor(loop_parts, box_surface)
+    executor = translation_executor(loop_parts, box_surface)
 
     def tick(uncertain: bool = False) -> None:
         loop.perceive()
@@ -472,9 +493,10 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
 
-    while not executor.returning and not executor.done:
+    while not isinstance(executor.state, ReturnHome) and not executor.done:
         tick()
-    assert executor.held.reference is not None and executor.held.sigma <= executor.settings.slip_position_sigma
+    held = executor.run.held
+    assert held.reference is not None and held.sigma <= executor.settings.slip_position_sigma
     ends = cell.time + 120.0
     while not executor.done and cell.time < ends:
         tick(uncertain=True)

@@ -1,4 +1,4 @@
-"""The level press choice (dmg_executor.controller): seen first, then the press that turns the object
+"""The level press choice (dmg_executor.push_planning): seen first, then the press that turns the object
 most nearly about the tilt's axis."""
 from __future__ import annotations
 
@@ -19,8 +19,10 @@ def test_a_level_press_is_chosen_seen_first_then_by_how_nearly_it_turns_the_obje
         presses, chosen):
     """A press along the grasp axis (x) at a lever beside the grasp's middle turns the object about
     lever x press; the tilt here is about y, which a lever along z turns it about."""
-    from dmg_executor.controller import _best_level_press, _Push, _torque_axis
+    from dmg_executor.motion import Route
+    from dmg_executor.push_planning import best_level_press, torque_axis
     from dmg_executor.push_points import PushPoint
+    from dmg_executor.run import Push
 
     middle, tilt_axis, reach = np.array([0.01, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 1.0, 0.0])
     candidates = []
@@ -28,8 +30,8 @@ def test_a_level_press_is_chosen_seen_first_then_by_how_nearly_it_turns_the_obje
         lever = 0.035 * Rotation.from_euler("x", lever_deg, degrees=True).apply([0.0, 0.0, 1.0])
         contact = PushPoint(middle + lever, np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]))
         runs = Rotation.from_euler("z", run_deg, degrees=True).apply(reach)
-        candidates.append((_Push(runs, runs, np.zeros(3), [], [], 0.035, contact), seen))
-    axes = [_torque_axis(middle, push.contact) for push, _ in candidates]
+        candidates.append((Push(runs, runs, np.zeros(3), Route([], []), 0.035, contact), seen))
+    axes = [torque_axis(middle, push.contact) for push, _ in candidates]
     assert [np.rad2deg(np.arccos(axis @ tilt_axis)) for axis in axes] == pytest.approx(
         [abs(lever_deg) for lever_deg, _, _ in presses])
-    assert _best_level_press(candidates, middle, tilt_axis, reach) is candidates[chosen][0]
+    assert best_level_press(candidates, middle, tilt_axis, reach) is candidates[chosen][0]

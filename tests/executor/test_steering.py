@@ -1,4 +1,4 @@
-"""Tilt steering (dmg_executor.controller.tilt_steering): the pusher slides against the tilt it sees."""
+"""Tilt steering (dmg_executor.grip.tilt_steering): the pusher slides against the tilt it sees."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 
 def test_tilt_steering_slides_the_pusher_against_the_tilt_the_way_the_longer_lever_decides():
-    from dmg_executor.controller import tilt_steering
+    from dmg_executor.grip import tilt_steering
 
     down_y = np.array([0.0, -1.0, 0.0])           # pushed along -y: the tilt that matters is about y x ... = z
     tilted = np.array([0.0, 0.0, np.deg2rad(2.0)])

@@ -1,0 +1,146 @@
+"""Moving the arms: the pusher along a route of waypoints under P control, stalls, and the ECTS split
+of a push's relative motion between the two arms."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dmg_common.transforms import turn_between
+from dmg_executor.contract import Command, GripCommand, Observation
+from dmg_executor.ects import arm_twists
+from dmg_executor.grip import tilt_hold_force
+from dmg_executor.push_points import ObjectSurface
+from dmg_executor.settings import ExecutorSettings
+
+
+@dataclass
+class Route:
+    """Where the pusher goes (base frame): waypoints on the way, then its goal, each with the orientation
+    wanted there (the camera on the object on the way)."""
+
+    waypoints: list[np.ndarray]
+    orientations: list[np.ndarray]
+    index: int = 0              # the waypoint the pusher is heading for
+
+    @property
+    def on_the_way(self) -> bool:
+        """Is the current waypoint one on the way (not the last of the route)?"""
+        return self.index < len(self.waypoints) - 1
+
+    @property
+    def finished(self) -> bool:
+        return self.index == len(self.waypoints)
+
+
+@dataclass
+class _Headway:
+    """The closest the pusher has come to where it is going, and when it last came closer."""
+
+    target: bytes          # where it is going (position and orientation)
+    offset: float          # m
+    turn: float            # rad
+    since: float           # s
+
+
+def limited(velocity: np.ndarray, limit: float, full: bool = False) -> np.ndarray:
+    """`velocity` capped at `limit` in size, or (`full`) at exactly `limit` its way."""
+    size = float(np.linalg.norm(velocity))
+    return velocity * (limit / size) if size > limit or (full and size > 0.0) else velocity
+
+
+def shift(twist: np.ndarray, from_point: np.ndarray, to_point: np.ndarray) -> np.ndarray:
+    """The same rigid motion as a twist at another point."""
+    return np.concatenate([twist[:3] + np.cross(twist[3:], to_point - from_point), twist[3:]])
+
+
+def coordinated(obs: Observation, relative: np.ndarray, alpha: float) -> Command:
+    """ECTS: the relative motion as a twist at the grasp axis, split by alpha, each arm's share
+    expressed at its own grasp frame."""
+    origin = obs.holder[:3, 3]
+    holder_twist, pusher_twist = arm_twists(np.zeros(6), relative, alpha)
+    return Command(holder=shift(holder_twist, origin, origin), pusher=shift(pusher_twist, origin, obs.pusher[:3, 3]))
+
+
+def held_grip(settings: ExecutorSettings) -> GripCommand:
+    """The holder's fingers closed at the hold force."""
+    return GripCommand(0.0, settings.hold_force)
+
+
+def loosened_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Observation) -> GripCommand:
+    """P control of the finger distance towards just inside the object's width, at the slide force,
+    or at what keeps the object's weight from tilting it off the grasp axis if that is more."""
+    s = settings
+    wanted = max(obs.opening - s.slide_squeeze, 0.0)
+    opening = obs.opening + s.finger_gain * (wanted - obs.opening)
+    tilt_hold = s.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
+                                                     surface.mass, obs.opening, s.grip_friction)
+    return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.slide_force, s.hold_force)))
+
+
+class Pilot:
+    """Takes the pusher along its current route and tells when it has arrived or stalled."""
+
+    def __init__(self, settings: ExecutorSettings):
+        self.settings = settings
+        self.route: Route | None = None
+        self._headway: _Headway | None = None
+
+    def follow(self, route: Route) -> None:
+        self.route = route
+
+    def go_to(self, obs: Observation, target: np.ndarray, orientation: np.ndarray | None = None,
+              through: bool = False) -> Command:
+        """P control of the pusher towards a position (and orientation), speeds limited. Going `through`
+        (a waypoint on the way), at full speed until within its tolerance: P control's slow tail at
+        each waypoint took about a second."""
+        s = self.settings
+        offset = target - obs.pusher[:3, 3]
+        velocity = limited(s.approach_gain * offset, s.approach_speed,
+                           through and np.linalg.norm(offset) > s.waypoint_tolerance)
+        angular = np.zeros(3)
+        if orientation is not None:
+            turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
+            angular = limited(s.approach_gain * turn, s.max_angular_speed,
+                              through and np.linalg.norm(turn) > s.approach.waypoint_turn_tolerance)
+        return Command(pusher=np.concatenate([velocity, angular]))
+
+    def along(self, obs: Observation) -> Command:
+        """Towards the current waypoint of the route: through the ones on the way, onto the last."""
+        route = self.route
+        return self.go_to(obs, route.waypoints[route.index], route.orientations[route.index], route.on_the_way)
+
+    def arrived(self, obs: Observation) -> bool:
+        """The pusher is at the current waypoint, turned as wanted there."""
+        route = self.route
+        offset = np.linalg.norm(route.waypoints[route.index] - obs.pusher[:3, 3])
+        turn = turn_between(route.orientations[route.index], obs.pusher[:3, :3])
+        # (where a push starts: on its line, precisely)
+        tolerance = self.settings.waypoint_tolerance if route.on_the_way else self.settings.position_tolerance
+        return offset < tolerance and turn < self.settings.approach.waypoint_turn_tolerance
+
+    def there_but_turned(self, obs: Observation) -> bool:
+        """Is the pusher at a waypoint on the way, only not turned as wanted there? That turn is a view
+        of the object on the way, not needed to go on (sim, bracket: two wrist joints 1 deg from their
+        limits 1 mm from the waypoint; the push was given up after `stall_time`, and gripper 1 sent back
+        and turned half round for another)."""
+        route = self.route
+        return route.on_the_way and float(np.linalg.norm(route.waypoints[route.index] - obs.pusher[:3, 3])) < \
+            self.settings.waypoint_tolerance
+
+    def stalled(self, obs: Observation, target: np.ndarray | None = None,
+                orientation: np.ndarray | None = None) -> bool:
+        """Has the pusher come no closer to `target` (turned to `orientation`, if given; by default the
+        current waypoint, turned as wanted there) for `stall_time`?"""
+        if target is None:
+            target, orientation = self.route.waypoints[self.route.index], self.route.orientations[self.route.index]
+        offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))
+        turn = 0.0 if orientation is None else turn_between(orientation, obs.pusher[:3, :3])
+        key = target.tobytes() + (b"" if orientation is None else orientation.tobytes())
+        headway, rules = self._headway, self.settings.approach
+        if (headway is None or headway.target != key or offset < headway.offset - rules.headway_distance
+                or turn < headway.turn - rules.headway_turn):
+            self._headway = _Headway(key, offset, turn, obs.time)
+            return False
+        return obs.time - headway.since > self.settings.stall_time
