@@ -114,10 +114,10 @@ class Campaign:
         image's: one taken while the holder turns is not trusted - sim, bracket: 7.5 deg seen mid-turn, 4.0
         true, ended a level press as having gained nothing)."""
         if self.leveling:
-            return float(np.linalg.norm(self.tilt_off_goal(obs.object_in_holder))), self.settings.level_tilt
+            return float(np.linalg.norm(self.tilt_off_goal(obs.object_in_holder))), self.settings.level.tilt
         if self.primitives[self.index].kind == PrimitiveKind.TRANSLATION:
-            return self.errors[0], self.settings.position_tolerance
-        return abs(self.errors[1]), self.settings.angle_tolerance
+            return self.errors[0], self.settings.tolerances.position
+        return abs(self.errors[1]), self.settings.tolerances.angle
 
     def finished(self, obs: Observation) -> bool:
         """Within tolerance, or close enough after a push, or out of pushes, or settled near the goal (a level
@@ -125,7 +125,7 @@ class Campaign:
         error, tolerance = self.error_and_tolerance(obs)
         if self.leveling:
             gained = self.level_began - error
-            level, settled = self.settings.level, self.settings.campaign.settled_share * self.settings.goal_angle_tolerance
+            level, settled = self.settings.level, self.settings.campaign.settled_share * self.settings.tolerances.goal_angle
             return (error <= tolerance or self.pushes >= level.pushes + 1 or (self.pushes > 0 and gained < level.done)
                     or (self.pushes >= level.pushes and error <= settled))
         return (error <= tolerance or (self.pushes > 0 and error <= self.settings.campaign.retry_factor * tolerance)
@@ -144,8 +144,8 @@ class Campaign:
             return False
         s = self.settings
         position, angle = self.final_errors(obs)
-        self.settled = (position <= s.campaign.settled_share * s.goal_position_tolerance
-                        and angle <= s.campaign.settled_share * s.goal_angle_tolerance)
+        self.settled = (position <= s.campaign.settled_share * s.tolerances.goal_position
+                        and angle <= s.campaign.settled_share * s.tolerances.goal_angle)
         if self.settled:
             self.notes.append(f"primitive {self.index} settled {position * 1000:.1f} mm and {np.rad2deg(angle):.1f} deg "
                               f"from the goal: its last push made no headway")
@@ -158,9 +158,9 @@ class Campaign:
         of the holder a press needs shifts the object ~1 mm in the grip (sim: box, plug)."""
         s = self.settings
         position, angle = self.final_errors(obs)
-        return (self.level_index is None and s.level_tilt > 0.0 and obs.object_tilt_sigma <= s.slip_tilt_sigma
-                and (position > s.goal_position_tolerance or angle > s.goal_angle_tolerance)
-                and np.linalg.norm(self.tilt_off_goal(obs.object_in_holder)) > s.level_tilt)
+        return (self.level_index is None and s.level.tilt > 0.0 and obs.object_tilt_sigma <= s.slip.tilt_sigma
+                and (position > s.tolerances.goal_position or angle > s.tolerances.goal_angle)
+                and np.linalg.norm(self.tilt_off_goal(obs.object_in_holder)) > s.level.tilt)
 
     def add_correction(self, obs: Observation, failed: PrimitiveKind | None = None) -> None:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,
@@ -172,8 +172,8 @@ class Campaign:
         self.index -= 1
         self.measure(obs)
         self.index += 1
-        shares = {PrimitiveKind.TRANSLATION: self.errors[0] / s.position_tolerance,
-                  PrimitiveKind.ROTATION: abs(self.errors[1]) / s.angle_tolerance}
+        shares = {PrimitiveKind.TRANSLATION: self.errors[0] / s.tolerances.position,
+                  PrimitiveKind.ROTATION: abs(self.errors[1]) / s.tolerances.angle}
         shares.pop(failed, None)
         kind = max(shares, key=shares.get)
         corrections = len(self.primitives) - self.plan_length - (self.level_index is not None)
@@ -192,10 +192,10 @@ class Campaign:
         s = self.settings
         position, angle = self.final_errors(obs)
         corrections = len(self.primitives) - self.plan_length
-        within = position <= s.goal_position_tolerance and angle <= s.goal_angle_tolerance
+        within = position <= s.tolerances.goal_position and angle <= s.tolerances.goal_angle
         summary = (f"{self.plan_length} primitives and {corrections} corrections done: contact "
                    f"{position * 1000:.1f} mm and {np.rad2deg(angle):.1f} deg from the goal")
         if not within:
-            summary += (f", outside the tolerance of {s.goal_position_tolerance * 1000:.1f} mm and "
-                        f"{np.rad2deg(s.goal_angle_tolerance):.1f} deg")
+            summary += (f", outside the tolerance of {s.tolerances.goal_position * 1000:.1f} mm and "
+                        f"{np.rad2deg(s.tolerances.goal_angle):.1f} deg")
         return within, "; ".join([summary] + self.notes), position, angle

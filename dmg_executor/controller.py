@@ -135,7 +135,7 @@ class PlanExecutor:
         if blind_push or run.holder_turning or run.holder_turns.far_side or run.search.searching:
             run.unseen_from = obs.time     # (a search is bounded by its vantage places)
         unseen = obs.time - max(obs.object_time, run.reckoned_time, run.unseen_from)
-        if obs.object_in_holder is not None and unseen > s.stale_after_held and step == Step.APPROACH:
+        if obs.object_in_holder is not None and unseen > s.monitors.stale_after_held and step == Step.APPROACH:
             # On the way to a push (or back from one given up) the held object has not moved: look for it
             # from vantage places round it, as after a push, before giving it up (sim: a box turned
             # 131 deg, the pusher stuck at a waypoint behind it, OBJECT_LOST on its way home).
@@ -143,9 +143,9 @@ class PlanExecutor:
                      f"{campaign.index}: looked for it")
             run.search.searching = True
             return self._go(Transition(FindContact()), obs)
-        if obs.object_in_holder is None or unseen > s.stale_after_held:
+        if obs.object_in_holder is None or unseen > s.monitors.stale_after_held:
             age = "never seen" if obs.object_in_holder is None else f"last seen {unseen:.2f} s ago"
-            return run.abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.stale_after_held:.2f} s) "
+            return run.abort(Outcome.OBJECT_LOST, f"object pose lost ({age}; limit {s.monitors.stale_after_held:.2f} s) "
                              f"during {step.name} of primitive {campaign.index}: stopped, gripper 1 closed at the "
                              "hold force")
         # Poses from images taken while the holder turns are not trusted, nor those with the object
@@ -155,7 +155,7 @@ class PlanExecutor:
         search = run.search
         search.searching = search.searching and not (fresh and (not search.seeking_certain or run.trust.certain(obs)))
         search.seeking_certain = search.seeking_certain and search.searching
-        if self.state.pushing and s.blind_pushes:
+        if self.state.pushing and s.push.blind:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
             # up for, and the push goes on when the camera loses the object.
             known = run.pushed.reckoning
@@ -166,13 +166,13 @@ class PlanExecutor:
                 known.blind = True
                 run.note(f"a push of primitive {campaign.index} went on unseen, on dead reckoning")
             run.reckoned, run.reckoned_time = known.believed(invert(obs.holder) @ obs.pusher), obs.time
-        elif not fresh and not s.blind_pushes and (stop := self.state.unseen_push(run, obs)) is not None:
+        elif not fresh and not s.push.blind and (stop := self.state.unseen_push(run, obs)) is not None:
             return stop
         elif run.reckoned is not None and fresh and obs.object_time >= run.reckoned_time:
             # Seen again after the push. Only a pose certain of its position judges it: an uncertain one
             # (a lone tag seen obliquely; sim: 11 mm off at 4 mm sigma) would have every later push that
             # way reach further for a miss that was not.
-            if obs.object_position_sigma <= s.slip_position_sigma:
+            if obs.object_position_sigma <= s.slip.position_sigma:
                 judge_blind_push(run, obs)
             run.reckoned = None
         held = run.held
@@ -187,16 +187,16 @@ class PlanExecutor:
             obs = replace(obs, object_in_holder=run.reckoned)    # pushed, not seen since: where it went
         elif held.better_than(obs):
             obs = replace(obs, object_in_holder=held.reference)   # held still since a certain pose
-        if obs.time - run.step_started > s.step_timeout:
+        if obs.time - run.step_started > s.limits.step_timeout:
             return run.abort(Outcome.STEP_TIMEOUT, f"{step.name} of primitive {campaign.index} did not finish in "
-                             f"{s.step_timeout:.1f} s (contact error {campaign.errors[0] * 1000:.1f} mm, angle error "
+                             f"{s.limits.step_timeout:.1f} s (contact error {campaign.errors[0] * 1000:.1f} mm, angle error "
                              f"{np.rad2deg(campaign.errors[1]):.1f} deg)")
         campaign.measure(obs)
         command = self._go(self.state.tick(run, obs), obs)
         spread = self._spread_wanted(obs)
         if spread != run.pusher_spread:
             run.pusher_spread = spread
-            command.pusher_grip = GripCommand(max(spread - 2 * s.tip_radius, 0.0), 0.0)
+            command.pusher_grip = GripCommand(max(spread - 2 * s.gripper.tip_radius, 0.0), 0.0)
         return command
 
     def _go(self, outcome: Command | Transition, obs: Observation) -> Command:
@@ -239,7 +239,7 @@ class PlanExecutor:
             self.slip_streak.clear()
             return None
         streak, held = self.slip_streak, self.run.held
-        if streak.add(obs) < self.settings.slip_poses:
+        if streak.add(obs) < self.settings.slip.poses:
             return None
         if held.reference is not None and len(held.poses) == 1 and poses_agree(streak.poses, self.settings):
             self.run.note(f"the pose the grip's reference was taken from disagreed with the {len(streak.poses)} "

@@ -284,7 +284,7 @@ class ExecutorNode(Node):
     def seen_fresh(self) -> bool:
         observation = self.observation()
         return (observation is not None and observation.object_in_holder is not None
-                and observation.time - observation.object_time <= self.settings.stale_after)
+                and observation.time - observation.object_time <= self.settings.monitors.stale_after)
 
     def robot_age(self) -> float:
         stamps = [self.poses[k][0] for k in ("holder", "pusher") if k in self.poses]
@@ -315,7 +315,7 @@ class ExecutorNode(Node):
         run, silent = self.run, self.silence()
         if run is None:
             self.publish_idle_state()
-        elif silent > self.settings.robot_timeout and not run.executor.done:
+        elif silent > self.settings.monitors.robot_timeout and not run.executor.done:
             # Silent robot and no control tick either (with sim time a dead simulator stops them
             # both); while ticks run, the tick's own check of the poses' age (node clock) applies.
             self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
@@ -328,7 +328,7 @@ class ExecutorNode(Node):
         executor = run.executor
         if run.goal_handle.is_cancel_requested:
             command = executor.cancel()
-        elif self.robot_age() > self.settings.robot_timeout:
+        elif self.robot_age() > self.settings.monitors.robot_timeout:
             command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
                                      f"{self.robot_age():.2f} s: stopped")
         else:

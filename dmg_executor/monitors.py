@@ -22,12 +22,12 @@ def limit_violation(obs: Observation, holder_start: np.ndarray, s: ExecutorSetti
     `holder_travel` from where the run started), or None."""
     for name, pose in (("holding", obs.holder), ("pushing", obs.pusher)):
         where = pose[:3, 3]
-        if np.any(where < s.workspace_min) or np.any(where > s.workspace_max):
+        if np.any(where < s.limits.workspace_min) or np.any(where > s.limits.workspace_max):
             return (f"the {name} gripper at {np.round(where, 3).tolist()} m left the "
-                    f"workspace {s.workspace_min.tolist()} .. {s.workspace_max.tolist()}")
+                    f"workspace {s.limits.workspace_min.tolist()} .. {s.limits.workspace_max.tolist()}")
     travel = float(np.linalg.norm(obs.holder[:3, 3] - holder_start[:3, 3]))
-    if travel > s.holder_travel:
-        return f"the holding gripper moved {travel * 1000:.0f} mm from its start (limit {s.holder_travel * 1000:.0f} mm)"
+    if travel > s.limits.holder_travel:
+        return f"the holding gripper moved {travel * 1000:.0f} mm from its start (limit {s.limits.holder_travel * 1000:.0f} mm)"
     return None
 
 
@@ -44,10 +44,10 @@ def tilt_since(reference: np.ndarray, now: np.ndarray) -> float:
 def moved_in_grip(obs: Observation, held: HeldPose, s: ExecutorSettings) -> str | None:
     """How the object moved against the held reference, when this pose and the reference are both
     certain enough of their position to tell and it moved more than `slip_distance`/`slip_angle`."""
-    if held.reference is None or max(obs.object_position_sigma, held.sigma) > s.slip_position_sigma:
+    if held.reference is None or max(obs.object_position_sigma, held.sigma) > s.slip.position_sigma:
         return None     # no evidence either way
     moved, turned = distance(held.reference, obs.object_in_holder)
-    if moved <= s.slip_distance and turned <= s.slip_angle:
+    if moved <= s.slip.distance and turned <= s.slip.angle:
         return None
     return (f"the object moved {moved * 1000:.1f} mm and {np.rad2deg(turned):.1f} deg in the closed grip "
             f"(that pose's uncertainty {obs.object_position_sigma * 1000:.1f} mm, "
@@ -58,7 +58,7 @@ def tilted_while_pushed(obs: Observation, pushed_reference: np.ndarray, s: Execu
     """How far the pushed object tilted off the grasp axis since its push began, when that is more than
     `slip_angle` by a pose certain of its tilt (a lone tag seen obliquely is not)."""
     tilt = tilt_since(pushed_reference, obs.object_in_holder)
-    if tilt <= s.slip_angle or obs.object_tilt_sigma > s.slip_tilt_sigma:
+    if tilt <= s.slip.angle or obs.object_tilt_sigma > s.slip.tilt_sigma:
         return None
     return (f"the pushed object tilted {np.rad2deg(tilt):.1f} deg off the grasp axis (that pose's uncertainty "
             f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
@@ -66,7 +66,7 @@ def tilted_while_pushed(obs: Observation, pushed_reference: np.ndarray, s: Execu
 
 def poses_agree(poses: list[np.ndarray], s: ExecutorSettings) -> bool:
     """Are these object poses each within the slip limits of the last?"""
-    return all(moved <= s.slip_distance and turned <= s.slip_angle
+    return all(moved <= s.slip.distance and turned <= s.slip.angle
                for moved, turned in (distance(pose, poses[-1]) for pose in poses[:-1]))
 
 

@@ -65,18 +65,18 @@ def coordinated(obs: Observation, relative: np.ndarray, alpha: float) -> Command
 
 def held_grip(settings: ExecutorSettings) -> GripCommand:
     """The holder's fingers closed at the hold force."""
-    return GripCommand(0.0, settings.hold_force)
+    return GripCommand(0.0, settings.grip.hold_force)
 
 
 def loosened_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Observation) -> GripCommand:
     """P control of the finger distance towards just inside the object's width, at the slide force,
     or at what keeps the object's weight from tilting it off the grasp axis if that is more."""
     s = settings
-    wanted = max(obs.opening - s.slide_squeeze, 0.0)
-    opening = obs.opening + s.finger_gain * (wanted - obs.opening)
-    tilt_hold = s.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
-                                                     surface.mass, obs.opening, s.grip_friction)
-    return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.slide_force, s.hold_force)))
+    wanted = max(obs.opening - s.grip.slide_squeeze, 0.0)
+    opening = obs.opening + s.grip.finger_gain * (wanted - obs.opening)
+    tilt_hold = s.grip.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
+                                                     surface.mass, obs.opening, s.grip.friction)
+    return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.grip.slide_force, s.grip.hold_force)))
 
 
 class Pilot:
@@ -97,12 +97,12 @@ class Pilot:
         each waypoint took about a second."""
         s = self.settings
         offset = target - obs.pusher[:3, 3]
-        velocity = limited(s.approach_gain * offset, s.approach_speed,
-                           through and np.linalg.norm(offset) > s.waypoint_tolerance)
+        velocity = limited(s.approach.gain * offset, s.approach.speed,
+                           through and np.linalg.norm(offset) > s.approach.waypoint_tolerance)
         angular = np.zeros(3)
         if orientation is not None:
             turn = Rotation.from_matrix(orientation @ obs.pusher[:3, :3].T).as_rotvec()
-            angular = limited(s.approach_gain * turn, s.max_angular_speed,
+            angular = limited(s.approach.gain * turn, s.limits.angular_speed,
                               through and np.linalg.norm(turn) > s.approach.waypoint_turn_tolerance)
         return Command(pusher=np.concatenate([velocity, angular]))
 
@@ -117,7 +117,7 @@ class Pilot:
         offset = np.linalg.norm(route.waypoints[route.index] - obs.pusher[:3, 3])
         turn = turn_between(route.orientations[route.index], obs.pusher[:3, :3])
         # (where a push starts: on its line, precisely)
-        tolerance = self.settings.waypoint_tolerance if route.on_the_way else self.settings.position_tolerance
+        tolerance = self.settings.approach.waypoint_tolerance if route.on_the_way else self.settings.tolerances.position
         return offset < tolerance and turn < self.settings.approach.waypoint_turn_tolerance
 
     def there_but_turned(self, obs: Observation) -> bool:
@@ -127,7 +127,7 @@ class Pilot:
         and turned half round for another)."""
         route = self.route
         return route.on_the_way and float(np.linalg.norm(route.waypoints[route.index] - obs.pusher[:3, 3])) < \
-            self.settings.waypoint_tolerance
+            self.settings.approach.waypoint_tolerance
 
     def stalled(self, obs: Observation, target: np.ndarray | None = None,
                 orientation: np.ndarray | None = None) -> bool:
@@ -143,4 +143,4 @@ class Pilot:
                 or turn < headway.turn - rules.headway_turn):
             self._headway = _Headway(key, offset, turn, obs.time)
             return False
-        return obs.time - headway.since > self.settings.stall_time
+        return obs.time - headway.since > self.settings.approach.stall_time

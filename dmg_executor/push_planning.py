@@ -70,7 +70,7 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
                                                run.settings.push.translation_slant))
             except PushError as error:
                 problems.append(str(error))
-        if motion[2] > s.position_tolerance and s.straddle_opening > 0.0:
+        if motion[2] > s.tolerances.position and s.straddle.opening > 0.0:
             try:
                 pushes.append(_straddle_point(run, holder_in_object))
             except PushError as error:
@@ -80,7 +80,7 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
         candidates = _watched(run, obs, pushes, occluders)
         # The most progress: the full motion when the camera can watch it.
         return max(candidates, key=lambda c: float(motion @ (invert(obs.holder)[:3, :3] @ c[0].direction)))[0]
-    limited = float(np.clip(run.campaign.errors[1], -s.max_push_angle, s.max_push_angle))
+    limited = float(np.clip(run.campaign.errors[1], -s.push.max_angle, s.push.max_angle))
     # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
     # goes across the fingers (beyond their tips, or between them towards the palm where that
     # fits) or along them towards the palm beside them, as the paper's; where none of those can be
@@ -113,16 +113,16 @@ def _straddle_point(run: Run, holder_in_object: np.ndarray) -> PushPoint:
     without meeting gripper 1's palm."""
     s = run.settings
     middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
-    halves = 2 * s.tip_radius + s.straddle.margins
-    halves = halves[2 * halves - 2 * s.tip_radius <= s.straddle_opening + 1e-9]
+    halves = 2 * s.gripper.tip_radius + s.straddle.margins
+    halves = halves[2 * halves - 2 * s.gripper.tip_radius <= s.straddle.opening + 1e-9]
     if not len(halves):
-        widest = 2 * (s.tip_radius + s.straddle.margins[0])
+        widest = 2 * (s.gripper.tip_radius + s.straddle.margins[0])
         raise PushError(f"a straddle push needs the pusher open {widest * 1000:.0f} mm "
-                        f"(straddle_opening {s.straddle_opening * 1000:.0f} mm)")
+                        f"(straddle_opening {s.straddle.opening * 1000:.0f} mm)")
     push = straddle_push(run.surface, middle, rotation[:, 2], rotation[:, 1], halves, s.straddle.twist,
                          s.push.translation_slant)
     depth = -float((push.point - middle) @ rotation[:, 2])     # towards the palm from the grasp's middle
-    room = s.finger_length - 2 * s.tip_radius - s.gap - s.clearance   # (its finger beside the tip, radius tip_radius)
+    room = s.gripper.finger_length - 2 * s.gripper.tip_radius - s.push.gap - s.approach.clearance   # (its finger beside the tip, radius tip_radius)
     if depth > room:
         raise PushError(f"the straddle push's face is {depth * 1000:.0f} mm towards gripper 1's palm (the pusher's "
                         f"fingers fit up to {room * 1000:.0f} mm)")
@@ -145,19 +145,19 @@ def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
         axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(run.campaign.level_axis)
         try:
             push = rotation_push(run.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
-                                 -angle, depth, 0.0, s.push.slant_limit, s.edge_margin)
+                                 -angle, depth, 0.0, s.push.slant_limit, s.push.edge_margin)
         except PushError as error:
             problems.append(str(error))
             continue
         lever = rotation.T @ (push.point - middle)      # holder frame
-        if lever[2] < 0.0 and abs(lever[1]) < 2 * s.tip_radius:
+        if lever[2] < 0.0 and abs(lever[1]) < 2 * s.gripper.tip_radius:
             problems.append(f"the level push at {np.round(lever * 1000, 1).tolist()} mm is between the fingers")
             continue
         pushes.append(push)
     if not pushes:
         raise PushError("no level push: " + "; ".join(problems))
     candidates = _watched(run, obs, pushes, occluders)
-    if not s.blind_pushes:
+    if not s.push.blind:
         candidates = [c for c in candidates if c[1] > 0]
     if not candidates:
         raise PushError("the wrist camera would see none of the object's tags from where a level push starts")
@@ -179,13 +179,13 @@ def _rotation_points(run: Run, obs: Observation, directions: np.ndarray, angle: 
     holder_in_object = invert(obs.object_in_holder)
     middle = on_grasp_axis(holder_in_object, height)   # (the torque about the axis is the same at any height)
     palm = -holder_in_object[:3, 2]
-    palm_room = s.finger_length - 2 * s.tip_radius - s.clearance
+    palm_room = s.gripper.finger_length - 2 * s.gripper.tip_radius - s.approach.clearance
     ranked = []
     for along_fingers, direction in zip(directions[:, 2] < -np.cos(np.pi / 4), directions @ holder_in_object[:3, :3].T):
-        for depth in s.push_depth * s.push.lever_shares:
+        for depth in s.push.depth * s.push.lever_shares:
             try:
                 push = rotation_push(run.surface, middle, holder_in_object[:3, 0], direction, -angle,
-                                     depth, 0.0, s.push.slant_limit, s.edge_margin)
+                                     depth, 0.0, s.push.slant_limit, s.push.edge_margin)
             except PushError as error:
                 problems.append(str(error))
                 continue
@@ -211,7 +211,7 @@ def _square_directions(run: Run, obs: Observation, motion: np.ndarray, holder_in
     # ... and one that would move the object less than the tolerance along the motion is no push.
     share = pushes @ motion
     wanted = ((share >= np.cos(run.settings.push.detour_limit) * float(np.linalg.norm(motion)))
-              & (share > run.settings.position_tolerance))
+              & (share > run.settings.tolerances.position))
     return list(pushes[wanted])
 
 
@@ -253,7 +253,7 @@ def _watched(run: Run, obs: Observation, pushes: list, occluders: Occluders) -> 
     # tells that its pusher slid off, shoves the object across the fingers or turns in the air (sim:
     # the plug's blind far-side rotations dropped it in 4 of 6 runs).
     # (A level press unseen turns no further than the tilt it began with and the give, `level.press_give`.)
-    if not seen and run.settings.blind_pushes and (run.campaign.primitive.kind == PrimitiveKind.TRANSLATION
+    if not seen and run.settings.push.blind and (run.campaign.primitive.kind == PrimitiveKind.TRANSLATION
                                                        or run.campaign.leveling):
         return candidates
     if not seen:
@@ -282,7 +282,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
         # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
         raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along "
                          "the holding gripper's hand from its palm side")
-    provisional = point - (1.5 * s.tip_radius + s.gap) * direction     # the reach depends on the orientation
+    provisional = point - (1.5 * s.gripper.tip_radius + s.push.gap) * direction     # the reach depends on the orientation
     if push.spread:
         views, seen = run.sight.straddling_views(obs, provisional, direction, occluders)
     else:   # where the push starts, the tips must not be spread along the grasp axis
@@ -299,16 +299,16 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     sweeping = run.campaign.primitive.kind == PrimitiveKind.ROTATION and not run.campaign.leveling
     clashes = sweeps = 0
     for first, view in enumerate(views):
-        start = push_start(point, normal, direction, view, s.tip_radius, s.gap, s.fingertips, s.push.slant_limit,
+        start = push_start(point, normal, direction, view, s.gripper.tip_radius, s.push.gap, s.fingertips, s.push.slant_limit,
                            push.spread)
         clash = run.sight.hands_clash(start, view, occluders)
         clashes += clash
-        shells = fingertip_shells(view, s.tip_radius, s.fingertips.tip_clearance, push.spread)
+        shells = fingertip_shells(view, s.gripper.tip_radius, s.fingertips.tip_clearance, push.spread)
         if clash or run.surface.inside(apply(to_object, start + shells)).any():
             continue
-        near = from_rotation(view, start + (s.gap - s.fingertips.sweep_back) * direction)
+        near = from_rotation(view, start + (s.push.gap - s.fingertips.sweep_back) * direction)
         if sweeping and not np.isfinite(sweep_to_touch(run.surface, object_pose, near, holder, direction,
-                                                       s.tip_radius, s.fingertips.sweep_limit, s.fingertips)):
+                                                       s.gripper.tip_radius, s.fingertips.sweep_limit, s.fingertips)):
             sweeps += 1
             continue
         break
@@ -323,14 +323,14 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
         raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) would {what} "
                          "however it is turned")
     views, seen = views[first:], seen[first:]
-    start = meeting_start(start, views[0], direction, object_pose, run.surface, s.tip_radius, s.gap, s.fingertips,
+    start = meeting_start(start, views[0], direction, object_pose, run.surface, s.gripper.tip_radius, s.push.gap, s.fingertips,
                           push.spread)
     if push.spread:
         outside_h = _straddle_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
                                     invert(obs.object_in_holder))
     pusher_h = apply(to_holder, obs.pusher[:3, 3])
     waypoints = [apply(holder, w) for w in run.plan_route(pusher_h, outside_h, box, run.home_in(holder))]
-    lever = float(np.linalg.norm(np.cross(point + s.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
+    lever = float(np.linalg.norm(np.cross(point + s.gripper.tip_radius * normal - holder[:3, 3], holder[:3, 0])))
     orientations = [run.sight.views(obs, place)[0][0] for place in waypoints[:-1]] + [views[0]] * 2
     others = distinct(views[1:][seen[1:] > 0], views[0], s.approach.other_views, s.approach.distinct_view)
     return Push(direction, direction_h, start, Route(waypoints + [start], orientations), lever, push, others,
@@ -345,7 +345,7 @@ def _straddle_entry(run: Run, start_h: np.ndarray, orientation_h: np.ndarray, sp
     s = run.settings
     fingers = orientation_h[:, 2]
     length = box.exit_distance(start_h, -fingers) + s.approach.exit_margin
-    shells = fingertip_shells(orientation_h, s.tip_radius, s.fingertips.tip_clearance, spread)
+    shells = fingertip_shells(orientation_h, s.gripper.tip_radius, s.fingertips.tip_clearance, spread)
     along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
     if run.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
         raise RouteError(f"the straddle push's open fingertips would meet the object on their way in to "

@@ -39,13 +39,13 @@ def judge_blind_push(run: Run, obs: Observation) -> None:
     direction = pushed.along
     believed = float((run.reckoned[:3, 3] - pushed.reference[:3, 3]) @ direction)
     seen = float((obs.object_in_holder[:3, 3] - pushed.reference[:3, 3]) @ direction)
-    tolerance = s.position_tolerance
+    tolerance = s.tolerances.position
     reached = seen >= tolerance / 2
     turned = abs(turned_since(pushed.reference, obs.object_in_holder))
     if reached and turned > s.campaign.partial_miss_turn:
         return     # the push turned the object too: what it lost along the push is not where it met the face
     if believed > tolerance and abs(believed - seen) > tolerance / 2:
-        run.memory.shortfalls.append((direction.copy(), min(believed - seen, s.gap)))
+        run.memory.shortfalls.append((direction.copy(), min(believed - seen, s.push.gap)))
         what = ("moved the object further than believed" if seen > believed else
                 "moved the object less than believed" if reached else "did not reach the object")
         run.note(f"a blind push of primitive {campaign.index} {what} (moved {seen * 1000:.1f} mm, believed "

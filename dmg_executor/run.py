@@ -65,7 +65,7 @@ class PushMemory:
         """How much further on than its pose says the object has been met by blind pushes this way (0 to `gap`)."""
         cone = np.cos(settings.campaign.shortfall_cone)
         extra = sum(amount for past, amount in self.shortfalls if float(past @ direction) >= cone)
-        return float(np.clip(extra, 0.0, settings.gap))
+        return float(np.clip(extra, 0.0, settings.push.gap))
 
     def missed_before(self, push: PushPoint, settings: ExecutorSettings) -> bool:
         near, aligned = settings.push.missed_near_distance, np.cos(settings.push.missed_near)
@@ -104,7 +104,7 @@ class Run:
         self.campaign = Campaign(settings, primitives, principal_finger)
         self.sight = Sight(settings, surface, camera, tags)
         self.pilot = Pilot(settings)
-        self.trust = PoseTrust(settings.slip_position_sigma, settings.slip_tilt_sigma, settings.reference_poses)
+        self.trust = PoseTrust(settings.slip.position_sigma, settings.slip.tilt_sigma, settings.slip.reference_poses)
         self.held = HeldPose(self.trust)      # the object pose the closed grip must keep
         self.memory = PushMemory()
         self.push: Push | None = None         # the push planned last; None once the pusher is routed elsewhere
@@ -161,7 +161,7 @@ class Run:
         if self.held.reference is not None and self.reckoned is None:
             return      # held since its pose was seen, the grip closed all along: still where it was seen
         # (an object pushed unseen is where dead reckoning puts it, not seen there: no reference yet)
-        if obs.time - obs.object_time > self.settings.stale_after or self.reckoned is not None:
+        if obs.time - obs.object_time > self.settings.monitors.stale_after or self.reckoned is not None:
             self.held.await_fresh()
         else:
             self.held.take(obs)
@@ -173,7 +173,7 @@ class Run:
 
     def fresh(self, obs: Observation) -> bool:
         """A trusted pose no older than `stale_after`."""
-        return self.trusted(obs) and obs.time - obs.object_time <= self.settings.stale_after
+        return self.trusted(obs) and obs.time - obs.object_time <= self.settings.monitors.stale_after
 
     def seen_since(self, since: float) -> bool:
         """Has a fresh pose from an image taken at or after `since` come?"""
@@ -183,8 +183,8 @@ class Run:
     # --- the space round the grasp and routes through it ---------------------------------------------
     def keep_out(self, obs: Observation) -> KeepOut:
         s = self.settings
-        return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.tip_radius, 2 * s.tip_radius,
-                        s.clearance, s.approach.palm_reach)
+        return keep_out(self.surface.vertices, obs.object_in_holder, obs.opening, s.gripper.tip_radius, 2 * s.gripper.tip_radius,
+                        s.approach.clearance, s.approach.palm_reach)
 
     def plan_route(self, start: np.ndarray, goal: np.ndarray, box: KeepOut, prefer: np.ndarray | None = None
                    ) -> list[np.ndarray]:
@@ -200,8 +200,8 @@ class Run:
         """How far from the holder's finger axis the pusher's tip must be while the holder turns the object."""
         s = self.settings
         body = apply(obs.object_in_holder, self.surface.vertices)
-        reach = max(float(np.hypot(body[:, 0], body[:, 1]).max()), obs.opening / 2 + 2.5 * s.tip_radius)
-        return reach + 2 * s.tip_radius + s.clearance
+        reach = max(float(np.hypot(body[:, 0], body[:, 1]).max()), obs.opening / 2 + 2.5 * s.gripper.tip_radius)
+        return reach + 2 * s.gripper.tip_radius + s.approach.clearance
 
     def clear_of_turn(self, obs: Observation, place: np.ndarray) -> bool:
         """Is the pusher's tip at `place` (base frame) out of reach of the object turning about the holder's fingers?"""
@@ -234,7 +234,7 @@ class Run:
         pushes, at alpha < 1, the start may have come within it)."""
         goal = self.home_in(obs.holder)
         if clear_of_turn:
-            radius, needed = float(np.hypot(*goal[:2])), self.turn_radius(obs) + self.settings.clearance
+            radius, needed = float(np.hypot(*goal[:2])), self.turn_radius(obs) + self.settings.approach.clearance
             if radius < needed:
                 outward = goal[:2] if radius > 1e-6 else apply(invert(obs.holder), obs.pusher[:3, 3])[:2]
                 goal[:2] = outward / np.linalg.norm(outward) * needed

@@ -6,7 +6,7 @@ both run the same controller on the same numbers.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, get_type_hints
 
 import numpy as np
 
@@ -31,6 +31,11 @@ class CampaignSettings:
 class ApproachSettings:
     """Getting the pusher to a push start (`approach.*`)."""
 
+    gain: float                    # 1/s
+    speed: float
+    clearance: float
+    waypoint_tolerance: float
+    stall_time: float
     waypoint_turn_tolerance: float   # rad
     exit_margin: float
     headway_distance: float
@@ -47,6 +52,18 @@ class ApproachSettings:
 class PushSettings:
     """Choosing and judging pushes (`push.*`)."""
 
+    linear_gain: float             # 1/s
+    angular_gain: float            # 1/s
+    speed: float
+    min_speed: float
+    gap: float
+    touch_margin: float
+    depth: float
+    edge_margin: float
+    max_angle: float               # rad
+    turn_stall: float              # rad
+    rotation_slide: float
+    blind: bool
     lever_shares: np.ndarray
     off_middle_shares: np.ndarray
     face_rays: int
@@ -79,6 +96,9 @@ class FingertipSettings:
 class MonitorSettings:
     """Stops and faults read from the grip and the object's turn (`monitors.*`)."""
 
+    stale_after: float
+    stale_after_held: float
+    robot_timeout: float
     dropped_share: float
     forced_open: float
     push_tilt_stop: float
@@ -89,6 +109,7 @@ class MonitorSettings:
 class HolderSettings:
     """When gripper 1 may go back to where it started (`holder.*`)."""
 
+    turn: float                    # rad
     moved_distance: float
     moved_turn: float              # rad
 
@@ -108,6 +129,7 @@ class LookSettings:
 class LevelSettings:
     """Pressing a tilted grasp level (`level.*`)."""
 
+    tilt: float                    # rad
     done: float                    # rad
     slack: float
     press_give: float
@@ -122,6 +144,7 @@ class LevelSettings:
 class StraddleSettings:
     """Straddle pushes: the pusher's tips either side of gripper 1's fingers (`straddle.*`)."""
 
+    opening: float
     margins: np.ndarray
     twist: float                   # rad
     fingers: float                 # rad
@@ -131,6 +154,8 @@ class StraddleSettings:
 class ViewSettings:
     """Which tags the wrist camera would see from a pusher pose (`views.*`)."""
 
+    tilt_limit: float              # rad
+    roll_limit: float              # rad
     grid_step: float               # rad
     edge_margin_px: float
     facing_limit: float            # rad
@@ -139,6 +164,71 @@ class ViewSettings:
     in_line: float                 # rad
     nearest: float
     surface_slack: float
+
+
+@dataclass(frozen=True)
+class SteeringSettings:
+    """Sliding the pusher along the grasp axis to steer a translated object's tilt back (`steering.*`)."""
+
+    gain: float                    # m/s per rad
+    speed: float
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Where the grippers may go, how fast they turn, how long a step may take (`limits.*`)."""
+
+    workspace_min: np.ndarray
+    workspace_max: np.ndarray
+    holder_travel: float
+    angular_speed: float           # rad/s
+    step_timeout: float
+
+
+@dataclass(frozen=True)
+class GripperSettings:
+    """The pushing gripper's shape: round fingertips, fingers and the hand behind them (`gripper.*`)."""
+
+    tip_radius: float
+    finger_length: float
+    hand_start: float
+    hand_end: float
+    hand_radius: float
+
+
+@dataclass(frozen=True)
+class GripSettings:
+    """Gripper 1's grip on the object: held, or loosened for a push (`grip.*`)."""
+
+    hold_force: float
+    slide_force: float
+    friction: float
+    tilt_hold_margin: float
+    slide_squeeze: float
+    settle: float
+    finger_gain: float
+
+
+@dataclass(frozen=True)
+class ToleranceSettings:
+    """When a push (and the run) is close enough (`tolerances.*`)."""
+
+    position: float
+    angle: float                   # rad
+    goal_position: float
+    goal_angle: float              # rad
+
+
+@dataclass(frozen=True)
+class SlipSettings:
+    """What counts as a slip, and how sure a pose must be to show one (`slip.*`)."""
+
+    distance: float
+    angle: float                   # rad
+    tilt_sigma: float              # rad
+    position_sigma: float
+    poses: int
+    reference_poses: int
 
 
 def _value(annotation: Any, name: str, values: dict[str, Any]) -> Any:
@@ -159,70 +249,14 @@ def _group(group_class: type, prefix: str, values: dict[str, Any]) -> Any:
     return group_class(**{f.name: _value(f.type, f.name, inner) for f in fields(group_class)})
 
 
-GROUPS = {"campaign": CampaignSettings, "approach": ApproachSettings, "push": PushSettings,
-          "fingertips": FingertipSettings, "monitors": MonitorSettings, "holder": HolderSettings,
-          "look": LookSettings, "level": LevelSettings, "straddle": StraddleSettings, "views": ViewSettings}
-
-
 @dataclass(frozen=True)
 class ExecutorSettings:
-    linear_gain: float
-    angular_gain: float
-    finger_gain: float
-    approach_gain: float
-    tilt_gain: float               # m/s per rad
-    tilt_speed: float
-    tilt_limit: float              # rad
-    roll_limit: float              # rad
-    approach_speed: float
-    push_speed: float
-    min_push_speed: float
-    max_angular_speed: float
-    workspace_min: np.ndarray
-    workspace_max: np.ndarray
-    holder_travel: float
-    tip_radius: float
-    clearance: float
-    gap: float
-    push_depth: float
-    edge_margin: float
-    finger_length: float
-    hand_start: float
-    hand_end: float
-    hand_radius: float
-    max_push_angle: float          # rad
-    touch_margin: float
-    turn_stall: float              # rad
-    rotation_slide: float
-    hold_force: float
-    slide_force: float
-    grip_friction: float
-    tilt_hold_margin: float
-    slide_squeeze: float
-    grip_settle: float
-    position_tolerance: float
-    goal_position_tolerance: float
-    goal_angle_tolerance: float    # rad
-    angle_tolerance: float         # rad
-    waypoint_tolerance: float
-    stale_after: float
-    stale_after_held: float
-    robot_timeout: float
-    slip_distance: float
-    slip_angle: float              # rad
-    slip_poses: int
-    reference_poses: int
-    slip_tilt_sigma: float         # rad
-    slip_position_sigma: float
-    step_timeout: float
-    stall_time: float
-    blind_pushes: bool
-    straddle_opening: float
-    holder_turn: float             # rad
-    level_tilt: float              # rad
+    """Every tunable of the executor core, in groups named as the parameters' prefixes."""
+
     campaign: CampaignSettings
     approach: ApproachSettings
     push: PushSettings
+    steering: SteeringSettings
     fingertips: FingertipSettings
     monitors: MonitorSettings
     holder: HolderSettings
@@ -230,20 +264,17 @@ class ExecutorSettings:
     level: LevelSettings
     straddle: StraddleSettings
     views: ViewSettings
+    limits: LimitSettings
+    gripper: GripperSettings
+    grip: GripSettings
+    tolerances: ToleranceSettings
+    slip: SlipSettings
 
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":
         """From parameter values named as in config/executor.yaml (angles there in degrees; a group's
         parameters are named `<group>.<field>`)."""
-        converted = {}
-        for field in fields(cls):
-            if field.name in GROUPS:
-                converted[field.name] = _group(GROUPS[field.name], field.name, values)
-            elif field.name.startswith("workspace"):
-                converted[field.name] = np.asarray(values[field.name], float)
-            else:
-                converted[field.name] = _value(field.type, field.name, values)
-        settings = cls(**converted)
+        settings = cls(**{field.name: _group(_GROUPS[field.name], field.name, values) for field in fields(cls)})
         settings.validate()
         return settings
 
@@ -252,11 +283,15 @@ class ExecutorSettings:
         return cls.from_values({**parameter_defaults("executor"), **overrides})
 
     def validate(self) -> None:
-        if self.workspace_min.shape != (3,) or self.workspace_max.shape != (3,) or \
-                np.any(self.workspace_min >= self.workspace_max):
-            raise ValueError(f"workspace_min {self.workspace_min.tolist()} must be 3 values below "
-                             f"workspace_max {self.workspace_max.tolist()}")
-        if self.min_push_speed > self.push_speed:
-            raise ValueError(f"min_push_speed {self.min_push_speed} exceeds push_speed {self.push_speed}")
-        if self.slide_force > self.hold_force:
-            raise ValueError(f"slide_force {self.slide_force} N exceeds hold_force {self.hold_force} N")
+        limits, push, grip = self.limits, self.push, self.grip
+        if limits.workspace_min.shape != (3,) or limits.workspace_max.shape != (3,) or \
+                np.any(limits.workspace_min >= limits.workspace_max):
+            raise ValueError(f"limits.workspace_min {limits.workspace_min.tolist()} must be 3 values below "
+                             f"limits.workspace_max {limits.workspace_max.tolist()}")
+        if push.min_speed > push.speed:
+            raise ValueError(f"push.min_speed {push.min_speed} exceeds push.speed {push.speed}")
+        if grip.slide_force > grip.hold_force:
+            raise ValueError(f"grip.slide_force {grip.slide_force} N exceeds grip.hold_force {grip.hold_force} N")
+
+
+_GROUPS = get_type_hints(ExecutorSettings)

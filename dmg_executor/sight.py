@@ -29,10 +29,10 @@ class Sight:
     def __init__(self, settings: ExecutorSettings, surface: ObjectSurface, camera: CameraModel | None,
                  tags: TagLayout | None):
         self.settings, self.surface, self.camera, self.tags = settings, surface, camera, tags
-        self.turns = (turns(settings.tilt_limit, settings.roll_limit, settings.views.grid_step)
+        self.turns = (turns(settings.views.tilt_limit, settings.views.roll_limit, settings.views.grid_step)
                       if camera is not None and tags is not None else None)
-        self.shape = GripperShape(settings.finger_length, settings.tip_radius, settings.hand_start, settings.hand_end,
-                                  settings.hand_radius)
+        self.shape = GripperShape(settings.gripper.finger_length, settings.gripper.tip_radius, settings.gripper.hand_start, settings.gripper.hand_end,
+                                  settings.gripper.hand_radius)
         self.neutral = np.eye(3)      # the pusher's orientation where it started, once known
 
     @property

@@ -25,7 +25,7 @@ class Approach(State):
 
     def tick(self, run: Run, obs: Observation) -> Command | Transition:
         s, pilot = run.settings, run.pilot
-        if obs.time < self.opened_at + s.grip_settle:
+        if obs.time < self.opened_at + s.grip.settle:
             return Command()      # the pusher opening for a straddle push, where its last stretch begins
         command = pilot.along(obs)
         arrived = pilot.arrived(obs)
@@ -35,7 +35,7 @@ class Approach(State):
             arrived = True
         if arrived:
             route = pilot.route
-            if not route.on_the_way and obs.time - obs.object_time > s.stale_after:
+            if not route.on_the_way and obs.time - obs.object_time > s.monitors.stale_after:
                 waiting = self._look_again(run, obs)     # at the push start: a fresh pose first, if any view gives one
                 if waiting is not None:
                     return waiting
@@ -55,11 +55,11 @@ class Approach(State):
         push = run.push
         if self.waiting_since is None:
             self.waiting_since = obs.time
-        elif obs.time - self.waiting_since > run.settings.stale_after:
+        elif obs.time - self.waiting_since > run.settings.monitors.stale_after:
             if push.other_views:
                 push.route.orientations[-1] = push.other_views.pop(0)
                 self.waiting_since = None
-            elif run.settings.blind_pushes:
+            elif run.settings.push.blind:
                 push.blind = True
                 return None
         return Command()
@@ -74,7 +74,7 @@ class Approach(State):
             return Command()
         run.memory.unreachable.append(push.direction)
         run.note(f"a push of primitive {run.campaign.index} given up: the pusher came no closer to waypoint "
-                 f"{route.index + 1} of {len(route.waypoints)} in {run.settings.stall_time:.1f} s")
+                 f"{route.index + 1} of {len(route.waypoints)} in {run.settings.approach.stall_time:.1f} s")
         try:
             run.head_home(obs)
         except RouteError:

@@ -45,7 +45,7 @@ class Execute(State):
 
     def enter(self, run: Run, obs: Observation) -> None:
         run.pushed = None
-        self.grip_until = obs.time + run.settings.grip_settle
+        self.grip_until = obs.time + run.settings.grip.settle
 
     @property
     def pushing(self) -> bool:
@@ -91,7 +91,7 @@ class Execute(State):
         # on, where blind pushes this way fell short).
         along = push.local_direction
         face = apply(obs.object_in_holder, push.contact.point)
-        reckoning = Reckoning(reference.copy(), pusher, apply(invert(pusher), face - s.gap * along),
+        reckoning = Reckoning(reference.copy(), pusher, apply(invert(pusher), face - s.push.gap * along),
                               face + run.memory.shortfall(along, s) * along,
                               np.zeros(3) if campaign.leveling else along.copy(),   # (a level push: believed unmoved)
                               turning=campaign.primitive.kind == PrimitiveKind.ROTATION)
@@ -123,7 +123,7 @@ class Execute(State):
         s, push, pushed, campaign = run.settings, run.push, run.pushed, run.campaign
         rotation = campaign.primitive.kind == PrimitiveKind.ROTATION
         closed = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - pushed.pusher[:3, 3]) @ push.local_direction)
-        short = s.touch_margin if not rotation and not campaign.leveling else 0.0
+        short = s.push.touch_margin if not rotation and not campaign.leveling else 0.0
         seen = pushed.reckoning.pose
         met = slid_since(pushed.reference, seen) > s.push.touched
         if campaign.leveling:     # or pressed back about the level axis (pose noise reaches 0.5 deg; the turn about
@@ -131,14 +131,14 @@ class Execute(State):
             met = met or self._level_left(run, pushed.reference) - self._level_left(run, seen) > s.push.turn_gain
         else:
             met = met or abs(turned_since(pushed.reference, seen)) > s.push.turn_gain
-        if closed < s.gap - short and not met:
-            command = coordinated(obs, np.concatenate([s.push_speed * push.direction, np.zeros(3)]), run.alpha)
+        if closed < s.push.gap - short and not met:
+            command = coordinated(obs, np.concatenate([s.push.speed * push.direction, np.zeros(3)]), run.alpha)
             command.holder_grip = held_grip(s) if campaign.leveling else loosened_grip(s, run.surface, obs)
             return command
         self.phase = Phase.PUSH
         if rotation and not campaign.leveling:
             sweep = sweep_to_touch(run.surface, obs.holder @ seen, obs.pusher, obs.holder,
-                                   obs.holder[:3, :3] @ push.local_direction, s.tip_radius, 2 * s.push.missed_turn,
+                                   obs.holder[:3, :3] @ push.local_direction, s.gripper.tip_radius, 2 * s.push.missed_turn,
                                    s.fingertips)
             self.sweep_to_face = sweep if np.isfinite(sweep) else 0.0
         return None
@@ -152,27 +152,27 @@ class Execute(State):
             return self._stop(run, obs, f"the object forced gripper 1's fingers {forced * 1000:.1f} mm wider than "
                                         "its grasp (turning over in the grip)")
         tilted = tilt_since(pushed.reference, obs.object_in_holder) if run.fresh(obs) else 0.0
-        if (s.monitors.push_tilt_stop * s.slip_angle < tilted <= s.slip_angle
-                and obs.object_tilt_sigma <= s.slip_tilt_sigma):
+        if (s.monitors.push_tilt_stop * s.slip.angle < tilted <= s.slip.angle
+                and obs.object_tilt_sigma <= s.slip.tilt_sigma):
             return self._stop(run, obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if campaign.primitive.kind == PrimitiveKind.TRANSLATION:
             along = float(campaign.remaining_motion(obs) @ (holder[:3, :3].T @ push.direction))
-            if along <= s.position_tolerance:
+            if along <= s.tolerances.position:
                 return self._tighten(run, obs)
-            speed = float(np.clip(s.linear_gain * along, s.min_push_speed, s.push_speed))
+            speed = float(np.clip(s.push.linear_gain * along, s.push.min_speed, s.push.speed))
             # Keep the push line through the grasp axis: an offset across it would turn the object.
             across = np.cross(push.direction, holder[:3, 0])
-            touching = obs.pusher[:3, 3] + leading_tip(push.direction, obs.pusher[:3, :3], s.tip_radius,
+            touching = obs.pusher[:3, 3] + leading_tip(push.direction, obs.pusher[:3, :3], s.gripper.tip_radius,
                                                        s.fingertips.leading_tip)
             offset = float((touching - holder[:3, 3]) @ across)
-            relative = np.concatenate([speed * push.direction - s.approach_gain * offset * across
+            relative = np.concatenate([speed * push.direction - s.approach.gain * offset * across
                                        + self._tilt_slide(run, obs) * holder[:3, 0], np.zeros(3)])
         else:
             turn = campaign.errors[1]
             turned = turned_since(pushed.reference, obs.object_in_holder)
-            budget = float(np.clip(turn + turned, -s.max_push_angle, s.max_push_angle))   # this push's share
+            budget = float(np.clip(turn + turned, -s.push.max_angle, s.push.max_angle))   # this push's share
             left = budget - turned
-            if abs(turn) <= s.angle_tolerance or left * np.sign(budget) <= s.angle_tolerance / 2:
+            if abs(turn) <= s.tolerances.angle or left * np.sign(budget) <= s.tolerances.angle / 2:
                 return self._tighten(run, obs)
             pusher_turned = abs(turned_since(pushed.pusher, invert(obs.holder) @ obs.pusher))
             stalled = self._turn_stalled(run, pusher_turned, turned)
@@ -187,13 +187,13 @@ class Execute(State):
                          f"the object stopped turning with the pusher")
                 return self._tighten(run, obs)
             slid = slid_since(pushed.reference, obs.object_in_holder)
-            if slid > s.rotation_slide:
+            if slid > s.push.rotation_slide:
                 run.note(f"a rotation push of primitive {campaign.index} stopped after {np.rad2deg(turned):.1f} deg: "
                          f"the object slid {slid * 1000:.1f} mm in the grip")
                 return self._tighten(run, obs)
             lever = max(push.lever, 1e-3)
-            rate = float(np.clip(s.angular_gain * abs(left), s.min_push_speed / lever,
-                                 min(s.max_angular_speed, s.push_speed / lever)))
+            rate = float(np.clip(s.push.angular_gain * abs(left), s.push.min_speed / lever,
+                                 min(s.limits.angular_speed, s.push.speed / lever)))
             relative = np.concatenate([np.zeros(3), np.sign(left) * rate * holder[:3, 0]])   # about the grasp axis
         command = coordinated(obs, relative, run.alpha)
         command.holder_grip = loosened_grip(s, run.surface, obs)
@@ -216,7 +216,7 @@ class Execute(State):
             run.note(f"a level press of primitive {run.campaign.index} stopped: the grasp slid {slid * 1000:.1f} mm "
                      "on the object (shoved across the fingers, not rolled on them)")
             return self._tighten(run, obs)
-        rate = float(np.clip(s.angular_gain * left, s.min_push_speed / lever, min(s.max_angular_speed, s.push_speed / lever)))
+        rate = float(np.clip(s.push.angular_gain * left, s.push.min_speed / lever, min(s.limits.angular_speed, s.push.speed / lever)))
         command = coordinated(obs, np.concatenate([np.zeros(3), rate * (obs.holder[:3, :3] @ run.campaign.level_axis)]),
                               run.alpha)
         command.holder_grip = held_grip(s)
@@ -247,23 +247,23 @@ class Execute(State):
         if abs(turned) >= (gain if mark is None else mark[1] + gain):
             self.turn_mark = (pusher_turned, abs(turned))
             return False
-        return mark is not None and pusher_turned - mark[0] > run.settings.turn_stall
+        return mark is not None and pusher_turned - mark[0] > run.settings.push.turn_stall
 
     @staticmethod
     def _tilt_slide(run: Run, obs: Observation) -> float:
         """Pusher speed [m/s] along the grasp axis that steers a translated object's tilt back
         (`tilt_steering`), from fresh poses certain of their tilt only."""
         s, pushed = run.settings, run.pushed
-        if (s.tilt_gain == 0.0 or pushed.reckoning.blind or obs.object_tilt_sigma > s.slip_tilt_sigma
-                or obs.time - obs.object_time > s.stale_after or run.push_spread):
+        if (s.steering.gain == 0.0 or pushed.reckoning.blind or obs.object_tilt_sigma > s.slip.tilt_sigma
+                or obs.time - obs.object_time > s.monitors.stale_after or run.push_spread):
             return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers)
         tilt = turn_since(pushed.reference, obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
         local = run.push.local_direction
-        reach = s.tip_radius * (1.0 + abs(float(local @ pusher[:3, 0])))    # the two tips sit side by side along x
+        reach = s.gripper.tip_radius * (1.0 + abs(float(local @ pusher[:3, 0])))    # the two tips sit side by side along x
         lever = -float(pusher[:3, 3] @ local) - reach
-        steer = tilt_steering(tilt, local, lever, s.grip_friction * obs.opening / 2)
-        return float(np.clip(s.tilt_gain * steer, -s.tilt_speed, s.tilt_speed))
+        steer = tilt_steering(tilt, local, lever, s.grip.friction * obs.opening / 2)
+        return float(np.clip(s.steering.gain * steer, -s.steering.speed, s.steering.speed))
 
     def _stop(self, run: Run, obs: Observation, why: str) -> Command:
         """End the push early, saying why in the result; the rest is planned from where the object is."""
@@ -272,5 +272,5 @@ class Execute(State):
 
     def _tighten(self, run: Run, obs: Observation) -> Command:
         self.phase = Phase.TIGHTEN
-        self.grip_until = obs.time + run.settings.grip_settle
+        self.grip_until = obs.time + run.settings.grip.settle
         return Command(holder_grip=held_grip(run.settings))

@@ -31,11 +31,11 @@ def push_when_turned(run: Run, primitive: Primitive, obs: Observation) -> bool:
     `holder_turn` about its fingers (the object's far side towards it)? Such a push is done on dead
     reckoning, so only with blind pushes."""
     s, turns = run.settings, run.holder_turns
-    if (s.holder_turn == 0.0 or not s.blind_pushes or turns.far_side or not turns.may_turn
+    if (s.holder.turn == 0.0 or not s.push.blind or turns.far_side or not turns.may_turn
             or not run.clear_of_turn(obs, run.pusher_home[:3, 3])):
         return False
     try:
-        plan_push(run, primitive, replace(obs, holder=_turned_holder(obs, s.holder_turn), pusher=run.pusher_home.copy()))
+        plan_push(run, primitive, replace(obs, holder=_turned_holder(obs, s.holder.turn), pusher=run.pusher_home.copy()))
     except (PushError, RouteError):
         return False
     return True
@@ -111,7 +111,7 @@ class FindContact(State):
         except (PushError, RouteError) as error:
             return self._no_push(run, obs, primitive, error)
         s = run.settings
-        outside = [p for p in push.route.waypoints if np.any(p < s.workspace_min) or np.any(p > s.workspace_max)]
+        outside = [p for p in push.route.waypoints if np.any(p < s.limits.workspace_min) or np.any(p > s.limits.workspace_max)]
         if outside:
             return run.abort(Outcome.LIMIT_VIOLATION, f"primitive {campaign.index}: the push needs the pusher at "
                              f"{np.round(outside[0], 3).tolist()} m, outside the workspace")

@@ -36,7 +36,7 @@ def start_holder_turn(run: Run, obs: Observation, back: bool, home: np.ndarray |
     elif back:
         angle = -turns.turned_by
     else:
-        angle = run.settings.holder_turn if angle is None else angle
+        angle = run.settings.holder.turn if angle is None else angle
         turns.turned_by = angle
     move = HolderMove(angle, back, None if home is None else home.copy())
     turns.far_side_pushed = turns.pressed_turned = False
@@ -128,7 +128,7 @@ class TurnHolder(State):
         if abs(self.turned - self.progress[0]) > s.approach.headway_turn:
             self.progress = (self.turned, obs.time)
         drift = float(np.linalg.norm(obs.holder[:3, 3] - self.place))
-        if obs.time - self.progress[1] > s.stall_time or drift > s.monitors.turn_drift:
+        if obs.time - self.progress[1] > s.approach.stall_time or drift > s.monitors.turn_drift:
             why = (f"moved {drift * 1000:.0f} mm" if drift > s.monitors.turn_drift
                    else f"stopped at {np.rad2deg(self.turned):.0f} deg")
             if self.back:
@@ -137,8 +137,8 @@ class TurnHolder(State):
             run.holder_turns.may_turn = False
             self.angle, self.back, self.progress, self.place = 0.0, True, (self.turned, obs.time), obs.holder[:3, 3].copy()
             return Command()
-        rate = float(np.clip(s.approach_gain * left, -s.max_angular_speed, s.max_angular_speed))
-        return Command(holder=np.concatenate([s.approach_gain * (self.place - obs.holder[:3, 3]), rate * current[:, 2]]))
+        rate = float(np.clip(s.approach.gain * left, -s.limits.angular_speed, s.limits.angular_speed))
+        return Command(holder=np.concatenate([s.approach.gain * (self.place - obs.holder[:3, 3]), rate * current[:, 2]]))
 
 
 class HolderHome(State):
@@ -157,18 +157,18 @@ class HolderHome(State):
         offset = self.home[:3, 3] - obs.holder[:3, 3]
         rotation = Rotation.from_matrix(self.home[:3, :3] @ obs.holder[:3, :3].T).as_rotvec()
         distance_left, angle_left = float(np.linalg.norm(offset)), float(np.linalg.norm(rotation))
-        if distance_left < s.waypoint_tolerance and angle_left < s.approach.waypoint_turn_tolerance:
+        if distance_left < s.approach.waypoint_tolerance and angle_left < s.approach.waypoint_turn_tolerance:
             run.reckoned_time = obs.time
             return Transition(find_contact.FindContact())
         headway = s.approach
         left = distance_left + angle_left * headway.headway_distance / headway.headway_turn     # headway in either counts
         if left < self.progress[0] - headway.headway_distance:
             self.progress = (left, obs.time)
-        if obs.time - self.progress[1] > s.stall_time:
+        if obs.time - self.progress[1] > s.approach.stall_time:
             run.note(f"the holding gripper stopped {distance_left * 1000:.0f} mm and "
                      f"{np.rad2deg(angle_left):.0f} deg short of where it started")
             run.holder_turns.may_return, run.reckoned_time = False, obs.time
             return Transition(find_contact.FindContact())
-        return Command(holder=np.concatenate([limited(s.approach_gain * offset, s.approach_speed),
-                                              limited(s.approach_gain * rotation, s.max_angular_speed)]))
+        return Command(holder=np.concatenate([limited(s.approach.gain * offset, s.approach.speed),
+                                              limited(s.approach.gain * rotation, s.limits.angular_speed)]))
 

@@ -32,7 +32,7 @@ class Leave(State):
         to_holder = invert(obs.holder)
         pusher = apply(to_holder, obs.pusher[:3, 3])
         if run.push_spread:
-            backed = pusher - s.gap * local
+            backed = pusher - s.push.gap * local
             fingers = to_holder[:3, :3] @ obs.pusher[:3, 2]
             out = box.exit_distance(backed, -fingers) + s.approach.exit_margin
             path = [backed, backed - out * fingers]
@@ -43,7 +43,7 @@ class Leave(State):
     def tick(self, run: Run, obs: Observation) -> Command | Transition:
         if self.retreat is None:    # (from the first tick after the grip closed again)
             self.retreat = self._retreat(run, obs)
-        tolerance = run.settings.waypoint_tolerance
+        tolerance = run.settings.approach.waypoint_tolerance
         short = float(np.linalg.norm(self.retreat[0] - obs.pusher[:3, 3]))
         if short < tolerance or run.pilot.stalled(obs, self.retreat[0]):
             # Stuck on the way out (sim: 25 s in LEAVE after the last push, the grasp within tolerance),

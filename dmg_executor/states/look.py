@@ -38,7 +38,7 @@ def vantage_places(run: Run, obs: Observation) -> list[tuple[np.ndarray, np.ndar
         turn = Rotation.from_rotvec([angle, 0.0, 0.0]).as_matrix()
         place = apply(obs.holder, box.nearest_outside(turn @ home))
         if (np.linalg.norm(np.array(taken) - place, axis=1).min() < s.look.same_place
-                or np.any(place < s.workspace_min) or np.any(place > s.workspace_max)):
+                or np.any(place < s.limits.workspace_min) or np.any(place > s.limits.workspace_max)):
             continue
         away = float(np.linalg.norm(place - obs.pusher[:3, 3]))
         views, seen = run.sight.views(obs, place, occluders=occluders,
@@ -98,7 +98,7 @@ class Look(State):
         if short < s.approach.waypoint_turn_tolerance or pilot.stalled(obs, self.place, self.views[0]):
             if self.since is None:
                 self.since = obs.time
-            elif obs.time - self.since > s.stale_after or (search.seeking_certain and run.seen_since(self.since)):
+            elif obs.time - self.since > s.monitors.stale_after or (search.seeking_certain and run.seen_since(self.since)):
                 # (seeking a certain pose, the first pose from a view is all it adds: the object is held still)
                 if search.seeking_certain and self._certain_from_views(run):
                     return command
@@ -123,7 +123,7 @@ class Look(State):
         taken = self.poses[-run.settings.look.view_poses:]
         poses = np.array([pose for pose, _ in taken])
         sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
-        if len(poses) < 2 or sigma > run.settings.slip_position_sigma:
+        if len(poses) < 2 or sigma > run.settings.slip.position_sigma:
             return False
         run.held.take_mean(poses, sigma, seen.object_time)
         run.search.searching = run.search.seeking_certain = False

@@ -24,7 +24,7 @@ def test_a_push_outside_the_workspace_is_refused_before_anything_moves(loop_part
 
     cell, loop, _, _ = loop_parts
     # A workspace that holds both grippers where they are, but not the space under the object.
-    executor = translation_executor(loop_parts, box_surface, workspace_min=[0.3, -0.5, 0.12])
+    executor = translation_executor(loop_parts, box_surface, **{"limits.workspace_min": [0.3, -0.5, 0.12]})
     pusher_before = cell.grasp_pose("arm2")[:3, 3]
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.LIMIT_VIOLATION and "outside the workspace" in outcome.message
@@ -75,7 +75,7 @@ def test_a_step_that_takes_too_long_ends_with_step_timeout_and_the_grip_held(loo
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, step_timeout=0.5)   # the approach needs seconds
+    executor = translation_executor(loop_parts, box_surface, **{"limits.step_timeout": 0.5})   # the approach needs seconds
     outcome = loop.run(executor, time_limit=30)
     assert outcome.outcome == Outcome.STEP_TIMEOUT and "APPROACH" in outcome.message
     assert cell.gripper_status("arm1").max_force == pytest.approx(15.0)
@@ -132,7 +132,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
         loop.apply(executor.update(loop.observe()))
         cell.run(loop.control_period)
     assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - home) > 0.02
-    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    stuck_until = cell.time + executor.settings.approach.stall_time + 1.0
     while cell.time < stuck_until:               # fault: the pushing arm does not move (a joint at its limit)
         loop.perceive()
         command = executor.update(loop.observe())
@@ -147,7 +147,7 @@ def test_a_pusher_that_cannot_get_to_the_push_start_gives_that_push_up_and_goes_
     assert outcome.outcome == Outcome.OUT_OF_TOLERANCE, outcome.message
     assert "could not get to where any push" in outcome.message
     assert np.linalg.norm(cell.grasp_pose("arm2")[:3, 3] - home) < 0.01
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket_run):
@@ -178,7 +178,7 @@ def test_a_holder_turn_that_stops_short_goes_back_and_is_not_tried_again(bracket
     assert outcome.message.count("turned the object -180 deg") == 1          # tried once
     holder_after = cell.grasp_pose("arm1")                                    # turned back, held
     assert np.rad2deg(turn_between(holder_after[:3, :3], holder_before[:3, :3])) < 3.0
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loop_parts, box_surface):
@@ -205,10 +205,10 @@ def test_one_stray_object_pose_is_no_slip_but_poses_that_keep_showing_it_are(loo
     for _ in range(5):
         tick()
     assert not executor.done, executor.result
-    for _ in range(executor.settings.slip_poses):
+    for _ in range(executor.settings.slip.poses):
         tick(0.014)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def test_a_held_object_seen_moved_is_a_slip_only_by_poses_certain_of_their_position(loop_parts, box_surface):
@@ -234,13 +234,13 @@ def test_a_held_object_seen_moved_is_a_slip_only_by_poses_certain_of_their_posit
     # The grip closes on a pose 7 mm off but 3 mm uncertain: the poses seen well after it replace it.
     while executor.step.name != "APPROACH" and not executor.done:
         tick(0.007, 0.003)
-    for _ in range(5 * executor.settings.slip_poses):
+    for _ in range(5 * executor.settings.slip.poses):
         tick()
     assert not executor.done, executor.result
-    for _ in range(3 * executor.settings.slip_poses):      # 14 mm off, 3 mm uncertain: no evidence
+    for _ in range(3 * executor.settings.slip.poses):      # 14 mm off, 3 mm uncertain: no evidence
         tick(0.014, 0.003)
     assert not executor.done, executor.result
-    for _ in range(executor.settings.slip_poses):
+    for _ in range(executor.settings.slip.poses):
         tick(0.014, 0.0002)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
     assert "moved 14." in executor.result.message and "uncertainty 0.2 mm" in executor.result.message
@@ -272,10 +272,10 @@ def test_a_pushed_object_seen_tilted_is_a_slip_only_by_poses_certain_of_their_ti
 
     while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and not executor.done:
         tick()
-    for _ in range(3 * executor.settings.slip_poses):      # a lone tag seen obliquely: 4 deg uncertain
+    for _ in range(3 * executor.settings.slip.poses):      # a lone tag seen obliquely: 4 deg uncertain
         tick(4.0)
     assert not executor.done, executor.result
-    for _ in range(executor.settings.slip_poses):
+    for _ in range(executor.settings.slip.poses):
         tick(0.5)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
     assert "tilted 9.0 deg" in executor.result.message and "uncertainty 0.5 deg" in executor.result.message
@@ -304,11 +304,11 @@ def test_a_push_stops_when_the_object_forces_the_loosened_fingers_wider_than_its
     assert in_phase(executor, Phase.TIGHTEN) is stops, (executor.state, widest, observation.opening)
     noted = [note for note in executor.notes if "forced gripper 1's fingers" in note]
     if stops:
-        assert executor.settings.monitors.forced_open < widened and command.holder_grip.max_force == executor.settings.hold_force
+        assert executor.settings.monitors.forced_open < widened and command.holder_grip.max_force == executor.settings.grip.hold_force
         assert len(noted) == 1 and "3.0 mm wider" in noted[0], executor.notes
         assert not executor.done     # the run goes on
     else:
-        assert not noted and command.holder_grip.max_force < executor.settings.hold_force
+        assert not noted and command.holder_grip.max_force < executor.settings.grip.hold_force
 
 
 @pytest.mark.parametrize("tilt_deg, stops", [(4.5, True), (3.0, False), (8.0, False)])
@@ -327,7 +327,7 @@ def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts
     while not (executor.step.name == "EXECUTE" and in_phase(executor, Phase.PUSH)) and cell.time < deadline:
         control_tick(loop, executor)
     assert in_phase(executor, Phase.PUSH), (executor.step, executor.result)
-    assert np.rad2deg(executor.settings.monitors.push_tilt_stop * executor.settings.slip_angle) == pytest.approx(4.0)
+    assert np.rad2deg(executor.settings.monitors.push_tilt_stop * executor.settings.slip.angle) == pytest.approx(4.0)
     loop.perceive()
     observation = loop.observe()
     tilted = executor.run.pushed.reference.copy()      # turned about gripper 1's y, through the object's origin
@@ -337,11 +337,11 @@ def test_a_push_stops_when_the_object_tilts_most_of_the_way_to_a_slip(loop_parts
     assert in_phase(executor, Phase.TIGHTEN) is stops, executor.state
     noted = [note for note in executor.notes if "tilted" in note and "stopped" in note]
     if stops:
-        assert command.holder_grip.max_force == executor.settings.hold_force
+        assert command.holder_grip.max_force == executor.settings.grip.hold_force
         assert len(noted) == 1 and f"tilted {tilt_deg:.1f} deg" in noted[0], executor.notes
         assert not executor.done     # the run goes on
     else:
-        assert not noted and command.holder_grip.max_force < executor.settings.hold_force
+        assert not noted and command.holder_grip.max_force < executor.settings.grip.hold_force
 
 
 def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(loop_parts, box_surface):
@@ -355,7 +355,7 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     executor = translation_executor(loop_parts, box_surface)
     while executor.step.name != "LEAVE" and not executor.done:
         control_tick(loop, executor)
-    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    stuck_until = cell.time + executor.settings.approach.stall_time + 1.0
     while cell.time < stuck_until and executor.step.name == "LEAVE":   # fault: the pushing arm does not move
         control_tick(loop, executor, pusher_stuck=True)
     assert executor.step.name != "LEAVE" and not executor.done, (executor.step, executor.result)
@@ -363,7 +363,7 @@ def test_a_pusher_stuck_backing_out_or_on_its_way_home_goes_on_from_where_it_is(
     deadline = cell.time + 60.0
     while not isinstance(executor.state, ReturnHome) and not executor.done and cell.time < deadline:
         control_tick(loop, executor)
-    stuck_until = cell.time + executor.settings.stall_time + 1.0
+    stuck_until = cell.time + executor.settings.approach.stall_time + 1.0
     while cell.time < stuck_until and not executor.done:    # the same on the way home
         control_tick(loop, executor, pusher_stuck=True)
     assert executor.done, executor.step
@@ -396,7 +396,7 @@ def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pos
             pose = observation.object_in_holder.copy()
             pose[:3, :3] = tilted @ pose[:3, :3]
             covariance = np.diag([3e-3, 3e-3, 3e-3, 0.01, np.deg2rad(0.5), 0.0]) ** 2
-            observation = replace(observation, object_in_holder=pose, object_time=observation.time - 1.5 * s.stale_after,
+            observation = replace(observation, object_in_holder=pose, object_time=observation.time - 1.5 * s.monitors.stale_after,
                                   object_covariance=covariance)
         loop.apply(executor.update(observation))
         cell.run(loop.control_period)
@@ -407,6 +407,6 @@ def test_a_tilt_seen_after_the_push_is_no_slip_while_the_grip_has_no_certain_pos
     while executor.step.name == "EXECUTE" and cell.time < deadline:     # pushed on, on dead reckoning
         tick(freeze=frozen)
     assert executor.step.name == "LEAVE" and executor.run.held.reference is None, (executor.step, executor.result)
-    for _ in range(3 * s.slip_poses):
+    for _ in range(3 * s.slip.poses):
         tick(tilt=True)
     assert not executor.done, executor.result

@@ -99,8 +99,8 @@ def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, b
     that share, the primitive is pushed again."""
     from dmg_executor.contract import Outcome
 
-    executor, seen = _pushed_once(loop_parts, box_surface, 0.002, headway, position_tolerance=0.0005,
-                                     goal_position_tolerance=goal_tolerance)
+    executor, seen = _pushed_once(loop_parts, box_surface, 0.002, headway, **{"tolerances.position": 0.0005,
+                                                                              "tolerances.goal_position": goal_tolerance})
     assert 0.0015 < seen < executor.settings.campaign.settled_share * 0.003, seen      # near the goal, not within twice position_tolerance
     settled = [note for note in executor.notes if "settled" in note]
     if settles:
@@ -125,7 +125,7 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
 
     cell, loop, make = bracket_run
     # Without turning the bracket, the far-side push would put the pusher's hand through gripper 1.
-    executor = make(holder_turn_deg=0.0)
+    executor = make(**{"holder.turn_deg": 0.0})
     refused = loop.run(executor, time_limit=60)
     assert refused.outcome == Outcome.OUT_OF_TOLERANCE and "into the holding gripper" in refused.message
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] > 0.012
@@ -146,7 +146,7 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     holder_after = cell.grasp_pose("arm1")                        # ... and turned back, in place, held
     assert np.rad2deg(turn_between(holder_after[:3, :3], holder_before[:3, :3])) < 3.0
     assert np.linalg.norm(holder_after[:3, 3] - holder_before[:3, 3]) < 0.01
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tips_either_side_of_the_fingers(
@@ -172,7 +172,7 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     assert max(pushing_open) > 0.02                                        # pushed with the tips opened ...
     assert cell.gripper_status("arm2").opening < 0.002                     # ... and closed after
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def _pusher_in_the_bracket_corner(bracket_run):
@@ -266,7 +266,7 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     executor.update(observation)
     object_pose = observation.holder @ observation.object_in_holder
     occluders = Occluders.of(executor.run.sight.shape, observation.holder, observation.opening)
-    radius, home = executor.settings.tip_radius, executor.run.pusher_home[:3, :3]
+    radius, home = executor.settings.gripper.tip_radius, executor.run.pusher_home[:3, :3]
     normal, along = np.array([-1.0, 0.0, 0.0]), np.array([1.0, 0.0, 0.0])      # the wall's inner face, pushed out
 
     def tip_inside(start, view) -> bool:
@@ -275,7 +275,7 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
 
     low = np.array([0.052, 0.0, 0.008 + radius + 0.001])                      # 1 mm more than a tip over the plate
     start = push_start(apply(object_pose, low), object_pose[:3, :3] @ normal, object_pose[:3, :3] @ along, home,
-                       radius, executor.settings.gap, executor.settings.fingertips, executor.settings.push.slant_limit)
+                       radius, executor.settings.push.gap, executor.settings.fingertips, executor.settings.push.slant_limit)
     assert tip_inside(start, home)
     with pytest.raises(RouteError, match="would put a fingertip into the object however it is turned"):
         push_from(executor.run, observation, PushPoint(low, normal, along), occluders)
@@ -296,7 +296,7 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     cell, loop, make = bracket_run
     tilt = lambda executor: _grasp_axis_tilt_deg(cell, executor)   # noqa: E731
 
-    unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, level_tilt_deg=0.0)
+    unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, **{"level.tilt_deg": 0.0})
     outcome = loop.run(unleveled, time_limit=150)
     assert outcome.outcome == Outcome.OUT_OF_TOLERANCE and tilt(unleveled) > 3.0, (outcome.message, tilt(unleveled))
     assert unleveled.run.campaign.level_index is None
@@ -315,8 +315,8 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt(executor))
     assert "presses the object level" in outcome.message
     assert pressed and pressed[0] > 3.0 and min(pressed) < 1.0, pressed      # pressed from > 3 to < 1 deg ...
-    assert tilt(executor) < np.rad2deg(executor.settings.level_tilt)         # ... and it stayed level
-    assert min(grips) == pytest.approx(executor.settings.hold_force, rel=0.05), grips     # the grip held
+    assert tilt(executor) < np.rad2deg(executor.settings.level.tilt)         # ... and it stayed level
+    assert min(grips) == pytest.approx(executor.settings.grip.hold_force, rel=0.05), grips     # the grip held
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
 
 
@@ -348,7 +348,7 @@ def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the
     tilt = _grasp_axis_tilt_deg(cell, executor)
     assert turned and pressed, outcome
     assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt)
-    assert tilt < np.rad2deg(executor.settings.level_tilt), tilt     # pressed level (not pressed: ~4 deg)
+    assert tilt < np.rad2deg(executor.settings.level.tilt), tilt     # pressed level (not pressed: ~4 deg)
 
 
 def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back_between_them(bracket_run):
@@ -402,7 +402,7 @@ def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_toleranc
 
     cell, loop, _, _ = loop_parts
     executor = translation_executor(loop_parts, box_surface, length=0.005)
-    assert executor.settings.level.pushes == 2 and executor.settings.campaign.settled_share * executor.settings.goal_angle_tolerance == pytest.approx(np.deg2rad(2.4))
+    assert executor.settings.level.pushes == 2 and executor.settings.campaign.settled_share * executor.settings.tolerances.goal_angle == pytest.approx(np.deg2rad(2.4))
     campaign = executor.run.campaign
     executor.primitives.append(replace(executor.primitives[-1]))      # the level press after the plan
     campaign.index = campaign.level_index = len(executor.primitives) - 1
@@ -523,7 +523,7 @@ def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loo
     assert any("stopped turning with the pusher" in note for note in executor.notes), executor.notes
     # Stopped within turn_stall (and the arm's lag) of the pusher turning on from there.
     turned_on = pusher_turned() - stuck_at
-    assert 0.0 < turned_on < executor.settings.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
+    assert 0.0 < turned_on < executor.settings.push.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
 
 
 def test_a_push_that_meets_the_object_before_the_gap_is_closed_stops_closing_it(loop_parts, box_surface):
@@ -583,7 +583,7 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
         cell.run(loop.control_period)
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("slid" in note for note in executor.notes), executor.notes
-    assert executor.settings.rotation_slide < slid < executor.settings.rotation_slide + 0.001, slid
+    assert executor.settings.push.rotation_slide < slid < executor.settings.push.rotation_slide + 0.001, slid
 
 
 def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_is_wide(loop_parts):
@@ -622,7 +622,7 @@ def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_
     assert push.point[2] > 0.04 + 1e-6, push.point          # on the bar
     in_holder = apply(invert(held), push.point)           # across the fingers, the full lever beyond the tips
     assert abs(push.direction @ [0.0, 1.0, 0.0]) > 0.99 and in_holder[2] == pytest.approx(
-        ExecutorSettings.defaults().push_depth, abs=1e-3), (push, in_holder)
+        ExecutorSettings.defaults().push.depth, abs=1e-3), (push, in_holder)
 
 
 def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned_again(loop_parts, box_surface):
@@ -695,7 +695,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
         loop.watch(0.5)
         planned = plan(graph, pose(invert(loop.seen)), pose(goal))
         assert [p.kind.name for p in planned.primitives][:1] == ["TRANSLATION"], planned.message
-        executor = PlanExecutor(ExecutorSettings.defaults(tilt_gain=tilt_gain), surface, planned.primitives[:1],
+        executor = PlanExecutor(ExecutorSettings.defaults(**{"steering.gain": tilt_gain}), surface, planned.primitives[:1],
                                 planned.principal_finger, 1.0, cell.time, loop.camera_model(), tags)
         first, largest, ends = cell.object_in_gripper("arm1"), 0.0, cell.time + 120.0
         while not executor.done and cell.time < ends:
@@ -706,7 +706,7 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
             largest = max(largest, float(np.rad2deg(np.linalg.norm(turned[1:]))))
         return largest
 
-    unsteered, steered = largest_tilt(0.0), largest_tilt(ExecutorSettings.defaults().tilt_gain)
+    unsteered, steered = largest_tilt(0.0), largest_tilt(ExecutorSettings.defaults().steering.gain)
     assert unsteered > 4.0 and steered < 2.0, (unsteered, steered)
 
 

@@ -46,15 +46,15 @@ def test_without_blind_pushes_a_push_that_loses_sight_of_the_object_stops_held_a
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, blind_pushes=False)
+    executor = translation_executor(loop_parts, box_surface, **{"push.blind": False})
     tick = _half_a_second_into_the_push(loop, executor)
     pushing_from = cell.object_in_gripper("arm1")
-    covered_until = cell.time + 1.5 * executor.settings.stale_after
+    covered_until = cell.time + 1.5 * executor.settings.monitors.stale_after
     while cell.time < covered_until:             # the camera sees nothing (a lens cap)
         tick(perceive=False)
     assert not executor.done and executor.step.name != "EXECUTE" or (
         isinstance(executor.state, Execute) and executor.state.phase == Phase.TIGHTEN)
-    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
     held = cell.object_in_gripper("arm1")
     assert distance(pushing_from, held)[0] < 0.012       # it stopped pushing within the stale limit
     outcome = loop.run(executor, time_limit=120)
@@ -69,7 +69,7 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, stale_after=0.3)    # less than the leave takes
+    executor = translation_executor(loop_parts, box_surface, **{"monitors.stale_after": 0.3})    # less than the leave takes
     tick = _half_a_second_into_the_push(loop, executor)
     while executor.step.name != "LEAVE" and not executor.done:
         tick()
@@ -78,7 +78,7 @@ def test_an_object_held_since_it_was_seen_needs_no_fresh_pose_to_go_on(loop_part
     for _ in range(5):
         tick(perceive=False)
     observation = loop.observe()
-    assert observation.time - observation.object_time > executor.settings.stale_after     # its pose is stale
+    assert observation.time - observation.object_time > executor.settings.monitors.stale_after     # its pose is stale
     assert not executor.done, executor.result
     assert _look(executor) is None and (executor.step.name == "APPROACH" or isinstance(executor.state, ReturnHome)), \
         executor.state
@@ -140,7 +140,7 @@ def test_a_held_object_lost_from_view_is_looked_for_from_vantage_places_round_it
             assert 1 <= executor.state.gone_to <= executor.settings.look.places
             loop.apply(executor.update(loop.observe()))
             cell.run(0.5)
-            assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.hold_force)
+            assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def test_places_a_look_saw_nothing_from_are_looked_from_last_in_the_runs_later_looks(loop_parts, box_surface):
@@ -228,7 +228,7 @@ def test_a_held_object_lost_from_view_on_the_way_to_a_push_is_looked_for_not_giv
     from dmg_executor.contract import Outcome
 
     cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, stale_after_held=3.0)
+    executor = translation_executor(loop_parts, box_surface, **{"monitors.stale_after_held": 3.0})
     tick = lambda perceive=True: (perceive and loop.perceive(), loop.apply(executor.update(loop.observe())),   # noqa: E731
                                   cell.run(loop.control_period))
     while executor.step.name != "APPROACH" and not executor.done:
@@ -347,7 +347,7 @@ def test_a_held_objects_pose_is_the_mean_of_the_certain_poses_seen_since_the_gri
     from dataclasses import replace
 
     cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, reference_poses=reference_poses)
+    executor = translation_executor(loop_parts, box_surface, **{"slip.reference_poses": reference_poses})
 
     def tick(jitter: float, sigma: float) -> float:
         """One tick on a fresh pose seen `jitter` off along the push (holder z), `sigma` uncertain; the contact error."""
@@ -413,7 +413,7 @@ def test_the_plans_end_is_judged_from_a_certain_pose_looked_for_where_the_last_w
     assert result.outcome in (Outcome.OK, Outcome.OUT_OF_TOLERANCE), result.message
     assert "judged from" not in result.message if judged is None else judged in result.message, result.message
     assert dwells or judged is None
-    assert max(dwells, default=0.0) < executor.settings.stale_after / 2, dwells
+    assert max(dwells, default=0.0) < executor.settings.monitors.stale_after / 2, dwells
 
 
 def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_poses_after_it_agree(
@@ -441,7 +441,7 @@ def test_a_grip_reference_taken_from_one_stray_pose_is_taken_again_once_the_pose
     while executor.step.name != "APPROACH" and not executor.done:
         tick(0.006)
     assert len(executor.run.held.poses) == 1
-    for _ in range(3 * executor.settings.slip_poses):
+    for _ in range(3 * executor.settings.slip.poses):
         tick(0.0)
     assert not executor.done, executor.result
     assert any("a stray pose, the reference taken again" in note for note in executor.notes), executor.notes
@@ -496,7 +496,7 @@ def test_a_held_object_is_taken_where_a_certain_pose_saw_it_while_later_poses_ar
     while not isinstance(executor.state, ReturnHome) and not executor.done:
         tick()
     held = executor.run.held
-    assert held.reference is not None and held.sigma <= executor.settings.slip_position_sigma
+    assert held.reference is not None and held.sigma <= executor.settings.slip.position_sigma
     ends = cell.time + 120.0
     while not executor.done and cell.time < ends:
         tick(uncertain=True)

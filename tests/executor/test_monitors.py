@@ -34,7 +34,7 @@ def seen(t: float, x: float = 0.0, tilt_deg: float = 0.0, sigma: float = 0.0002,
 
 
 def held_at(obs: Observation) -> HeldPose:
-    held = HeldPose(PoseTrust(S.slip_position_sigma, S.slip_tilt_sigma, S.reference_poses))
+    held = HeldPose(PoseTrust(S.slip.position_sigma, S.slip.tilt_sigma, S.slip.reference_poses))
     held.take(obs)
     return held
 
@@ -42,31 +42,31 @@ def held_at(obs: Observation) -> HeldPose:
 def test_a_gripper_outside_the_workspace_or_a_holder_moved_too_far_is_a_limit_violation():
     start = seen(0.0)
     assert limit_violation(start, start.holder, S) is None
-    outside = seen(0.1, pusher=(S.workspace_max[0] + 0.01, 0.0, 0.2))
+    outside = seen(0.1, pusher=(S.limits.workspace_max[0] + 0.01, 0.0, 0.2))
     assert "pushing gripper" in limit_violation(outside, start.holder, S)
-    wandered = seen(0.1, holder=(0.7, 0.2 + S.holder_travel + 0.01, 0.2))
+    wandered = seen(0.1, holder=(0.7, 0.2 + S.limits.holder_travel + 0.01, 0.2))
     assert "holding gripper moved" in limit_violation(wandered, start.holder, S)
 
 
 def test_a_certain_pose_moved_past_slip_distance_in_the_closed_grip_is_a_slip():
     held = held_at(seen(0.0))
-    assert moved_in_grip(seen(0.1, x=S.slip_distance * 0.8), held, S) is None
-    assert "in the closed grip" in moved_in_grip(seen(0.1, x=S.slip_distance * 1.2), held, S)
+    assert moved_in_grip(seen(0.1, x=S.slip.distance * 0.8), held, S) is None
+    assert "in the closed grip" in moved_in_grip(seen(0.1, x=S.slip.distance * 1.2), held, S)
 
 
 def test_a_pose_too_uncertain_of_its_position_shows_no_slip_nor_does_an_uncertain_reference():
-    far = S.slip_distance * 2
-    assert moved_in_grip(seen(0.1, x=far, sigma=S.slip_position_sigma * 2), held_at(seen(0.0)), S) is None
-    assert moved_in_grip(seen(0.1, x=far), held_at(seen(0.0, sigma=S.slip_position_sigma * 2)), S) is None
+    far = S.slip.distance * 2
+    assert moved_in_grip(seen(0.1, x=far, sigma=S.slip.position_sigma * 2), held_at(seen(0.0)), S) is None
+    assert moved_in_grip(seen(0.1, x=far), held_at(seen(0.0, sigma=S.slip.position_sigma * 2)), S) is None
 
 
 def test_a_pushed_object_tilted_past_slip_angle_is_a_slip_only_by_a_pose_certain_of_its_tilt():
     start = seen(0.0).object_in_holder
-    tilted = np.rad2deg(S.slip_angle) + 1.0
+    tilted = np.rad2deg(S.slip.angle) + 1.0
     assert abs(tilt_since(start, seen(0.1, tilt_deg=tilted).object_in_holder) - np.deg2rad(tilted)) < 1e-9
     assert "tilted" in tilted_while_pushed(seen(0.1, tilt_deg=tilted), start, S)
-    assert tilted_while_pushed(seen(0.1, tilt_deg=tilted, tilt_sigma_deg=np.rad2deg(S.slip_tilt_sigma) * 2), start, S) is None
-    assert tilted_while_pushed(seen(0.1, tilt_deg=np.rad2deg(S.slip_angle) - 1.0), start, S) is None
+    assert tilted_while_pushed(seen(0.1, tilt_deg=tilted, tilt_sigma_deg=np.rad2deg(S.slip.tilt_sigma) * 2), start, S) is None
+    assert tilted_while_pushed(seen(0.1, tilt_deg=np.rad2deg(S.slip.angle) - 1.0), start, S) is None
 
 
 def test_a_streak_counts_each_image_once_and_poses_agree_within_the_slip_limits():
@@ -76,4 +76,4 @@ def test_a_streak_counts_each_image_once_and_poses_agree_within_the_slip_limits(
     assert streak.poses == []
     near = [seen(t, x=0.0005 * i).object_in_holder for i, t in enumerate((0.1, 0.2, 0.3))]
     assert poses_agree(near, S)
-    assert not poses_agree([*near, seen(0.4, x=S.slip_distance * 2).object_in_holder], S)
+    assert not poses_agree([*near, seen(0.4, x=S.slip.distance * 2).object_in_holder], S)

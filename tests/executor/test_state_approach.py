@@ -17,8 +17,8 @@ def test_the_pusher_follows_its_route_and_at_the_push_start_the_grip_loosens_for
     outcome = drive(Approach(), run, cell)
     assert isinstance(outcome.to, Execute)
     grip = outcome.command.holder_grip
-    assert grip is not None and grip.opening < cell.opening and grip.max_force < run.settings.hold_force
-    assert np.linalg.norm(cell.pusher[:3, 3] - run.push.start) < run.settings.position_tolerance
+    assert grip is not None and grip.opening < cell.opening and grip.max_force < run.settings.grip.hold_force
+    assert np.linalg.norm(cell.pusher[:3, 3] - run.push.start) < run.settings.tolerances.position
 
 
 def test_at_the_push_start_with_no_fresh_pose_it_waits_then_pushes_blind():
@@ -26,11 +26,11 @@ def test_at_the_push_start_with_no_fresh_pose_it_waits_then_pushes_blind():
     cell.pusher[:3, 3] = run.push.start
     cell.pusher[:3, :3] = run.push.route.orientations[-1]
     run.pilot.route.index = len(run.pilot.route.waypoints) - 1
-    cell.seen_at = cell.time - 2 * run.settings.stale_after     # the last pose is stale
+    cell.seen_at = cell.time - 2 * run.settings.monitors.stale_after     # the last pose is stale
     state = Approach()
     outcome = state.tick(run, cell.observe())
     assert isinstance(outcome, Command) and not run.push.blind      # waiting for a fresh pose
-    cell.time += 1.5 * run.settings.stale_after
+    cell.time += 1.5 * run.settings.monitors.stale_after
     outcome = state.tick(run, cell.observe())        # none came, and no other view to try: the push goes blind
     assert isinstance(outcome, Transition) and isinstance(outcome.to, Execute) and run.push.blind
 

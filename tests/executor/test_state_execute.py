@@ -38,7 +38,7 @@ def test_the_push_goes_through_its_phases_and_moves_the_object_to_within_toleran
             pushed_speeds.append(float(outcome.pusher[:3] @ run.push.direction))
         cell.move(outcome)
         # the object moves with the pusher's tip once it has reached the face (the held object otherwise stays)
-        tip = cell.pusher[:3, 3] + s.tip_radius * run.push.direction
+        tip = cell.pusher[:3, 3] + s.gripper.tip_radius * run.push.direction
         beyond = float((tip - face) @ run.push.direction)
         if beyond > 0:
             moved = np.eye(4)
@@ -48,11 +48,11 @@ def test_the_push_goes_through_its_phases_and_moves_the_object_to_within_toleran
     assert isinstance(outcome.to, Leave) and run.campaign.pushes == 1
     assert [p for i, p in enumerate(phases) if i == 0 or phases[i - 1] != p] == \
         [Phase.LOOSEN, Phase.TOUCH, Phase.PUSH, Phase.TIGHTEN]
-    assert phases.count(Phase.LOOSEN) * 0.02 >= s.grip_settle - 0.03     # the grip had time to loosen
-    assert all(0.0 < speed <= s.push_speed + 1e-9 for speed in pushed_speeds)
+    assert phases.count(Phase.LOOSEN) * 0.02 >= s.grip.settle - 0.03     # the grip had time to loosen
+    assert all(0.0 < speed <= s.push.speed + 1e-9 for speed in pushed_speeds)
     assert pushed_speeds[-1] < pushed_speeds[0]           # P control slows down as the goal nears
     run.campaign.measure(cell.observe())
-    assert run.campaign.errors[0] <= s.position_tolerance + 1e-4
+    assert run.campaign.errors[0] <= s.tolerances.position + 1e-4
     assert run.pushed is not None and np.allclose(run.pushed.along, run.push.local_direction)
 
 
@@ -61,7 +61,7 @@ def test_a_push_that_loses_sight_of_the_object_without_blind_pushes_tightens_at_
     obs = cell.observe()
     assert isinstance(state.tick(run, obs), Command) and state.phase == Phase.LOOSEN
     stop = state.unseen_push(run, obs)
-    assert state.phase == Phase.TIGHTEN and stop.holder_grip.max_force == run.settings.hold_force
+    assert state.phase == Phase.TIGHTEN and stop.holder_grip.max_force == run.settings.grip.hold_force
     assert "unseen" in run.campaign.notes[-1]
     assert state.unseen_push(run, obs) is None           # already tightening: nothing more to stop
 
@@ -69,13 +69,13 @@ def test_a_push_that_loses_sight_of_the_object_without_blind_pushes_tightens_at_
 def test_the_object_forcing_the_fingers_open_stops_the_push():
     cell, run, state = at_push_start()
     obs = cell.observe()
-    cell.time += run.settings.grip_settle + 0.01
+    cell.time += run.settings.grip.settle + 0.01
     state.tick(run, cell.observe())
     assert state.phase == Phase.TOUCH
-    cell.pusher[:3, 3] += run.settings.gap * run.push.direction       # the gap closed: pushing
+    cell.pusher[:3, 3] += run.settings.push.gap * run.push.direction       # the gap closed: pushing
     state.tick(run, cell.observe())
     assert state.phase == Phase.PUSH
     cell.opening = obs.opening + 2 * run.settings.monitors.forced_open
     command = state.tick(run, cell.observe())
-    assert state.phase == Phase.TIGHTEN and command.holder_grip.max_force == run.settings.hold_force
+    assert state.phase == Phase.TIGHTEN and command.holder_grip.max_force == run.settings.grip.hold_force
     assert "forced gripper 1's fingers" in run.campaign.notes[-1]

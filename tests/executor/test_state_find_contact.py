@@ -25,7 +25,7 @@ def test_a_translation_is_planned_as_a_push_square_onto_the_face_towards_the_pus
     assert np.allclose(push.direction, [0.0, 1.0, 0.0], atol=1e-9)
     assert np.allclose(push.contact.normal, [1.0, 0.0, 0.0], atol=1e-6)
     face_y = cell.holder[1, 3] - 0.050
-    assert push.start[1] < face_y - run.settings.gap / 2          # the pusher starts short of the face
+    assert push.start[1] < face_y - run.settings.push.gap / 2          # the pusher starts short of the face
     assert run.pilot.route is push.route and np.allclose(push.route.waypoints[-1], push.start)
     assert run.campaign.error_before_push == 0.010
 

@@ -15,7 +15,7 @@ from synthetic import box_cell, box_run, translation
 def start_turn(cell, run):
     outcome = start_holder_turn(run, cell.observe(), back=False)
     assert isinstance(outcome, Transition) and isinstance(outcome.to, ClearForTurn)
-    assert outcome.to.turns_holder and run.holder_turns.turned_by == run.settings.holder_turn
+    assert outcome.to.turns_holder and run.holder_turns.turned_by == run.settings.holder.turn
     return outcome.to
 
 
@@ -36,7 +36,7 @@ def test_the_holder_turns_the_object_once_the_pusher_is_clear_and_the_far_side_f
     assert isinstance(outcome.to, FindContact) and run.holder_turns.far_side
     assert run.clear_of_turn(cell.observe(), cell.pusher[:3, 3])
     turned = np.arctan2(*(cell.holder[:3, :3].T @ np.eye(3)[:, 0])[[1, 0]])   # base x seen in the holder's frame
-    assert abs(abs(turned) - abs(run.settings.holder_turn)) < run.settings.approach.waypoint_turn_tolerance + 0.01
+    assert abs(abs(turned) - abs(run.settings.holder.turn)) < run.settings.approach.waypoint_turn_tolerance + 0.01
     assert np.linalg.norm(cell.holder[:3, 3] - held_at) < 0.005       # turned in place
     assert run.held.pending                                           # the next fresh pose is the reference
 
@@ -47,7 +47,7 @@ def test_a_turn_that_stops_gaining_turns_back_and_is_not_tried_again():
     state = TurnHolder(np.pi, back=False, obs=cell.observe())
     outcome = state.tick(run, cell.observe())
     assert isinstance(outcome, Command) and outcome.holder[5] != 0.0
-    cell.time += run.settings.stall_time + 0.1                        # the wrist at its limit: no turn
+    cell.time += run.settings.approach.stall_time + 0.1                        # the wrist at its limit: no turn
     outcome = state.tick(run, cell.observe())
     assert isinstance(outcome, Command) and not run.holder_turns.may_turn and state.back and state.angle == 0.0
     assert "could not turn the object" in run.campaign.notes[-1]

@@ -14,7 +14,7 @@ from synthetic import box_cell, box_run, drive, planned_translation, translation
 
 def test_after_a_push_the_pusher_backs_out_along_the_push_line_clear_of_the_kept_free_space():
     cell, run = planned_translation()
-    cell.pusher[:3, 3] = run.push.start + run.settings.gap * run.push.direction      # at the face, as pushed
+    cell.pusher[:3, 3] = run.push.start + run.settings.push.gap * run.push.direction      # at the face, as pushed
     start = cell.pusher[:3, 3].copy()
     outcome = drive(Leave(), run, cell)
     assert isinstance(outcome.to, FindContact)
@@ -34,7 +34,7 @@ def test_the_plans_end_takes_the_pusher_home_and_reports_the_errors():
     result = run.result
     assert result.outcome == Outcome.OK, result.message
     assert np.linalg.norm(cell.pusher[:3, 3] - run.pusher_home[:3, 3]) < 0.01
-    assert result.position_error < run.settings.goal_position_tolerance and "1 primitives" in result.message
+    assert result.position_error < run.settings.tolerances.goal_position and "1 primitives" in result.message
 
 
 def test_the_plans_end_outside_the_goals_tolerance_is_reported_as_such():

@@ -81,17 +81,17 @@ def test_the_loosened_grip_the_executor_picks_keeps_the_bracket_from_tilting_whe
     cell = Cell()
     try:
         tilts = {}
-        for margin in (1.0, settings.tilt_hold_margin):
+        for margin in (1.0, settings.grip.tilt_hold_margin):
             cell.reset("bracket")
             cell.run(0.5)
             start = cell.object_in_gripper("arm1")
             balance = tilt_hold_force(start, cell.grasp_pose("arm1")[:3, :3], surface.centre_of_mass, surface.mass,
-                                      cell.opening("arm1"), settings.grip_friction)
-            assert 0.5 < balance < settings.hold_force     # the bracket's weight does turn it: there is something to hold
-            cell.command_gripper("arm1", max(cell.opening("arm1") - settings.slide_squeeze, 0.0), margin * balance)
+                                      cell.opening("arm1"), settings.grip.friction)
+            assert 0.5 < balance < settings.grip.hold_force     # the bracket's weight does turn it: there is something to hold
+            cell.command_gripper("arm1", max(cell.opening("arm1") - settings.grip.slide_squeeze, 0.0), margin * balance)
             cell.run(2.0)
             axes = invert(start)[:3, 0], invert(cell.object_in_gripper("arm1"))[:3, 0]
             tilts[margin] = math.degrees(math.acos(min(1.0, float(axes[0] @ axes[1]))))
     finally:
         cell.close()
-    assert tilts[1.0] > 3.0 and tilts[settings.tilt_hold_margin] < 0.5, tilts
+    assert tilts[1.0] > 3.0 and tilts[settings.grip.tilt_hold_margin] < 0.5, tilts
