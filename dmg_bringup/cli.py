@@ -17,6 +17,7 @@ from dmg_bringup import (
     graph_cli,
     launcher,
     monitor,
+    object_generator,
     perception_bench,
     planner_bench,
     ros_verbs,
@@ -56,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     monitor.register(subparsers)
     evaluation.register(subparsers)
     docs.register(subparsers)
+    object_generator.register(subparsers)
     bench = subparsers.add_parser("bench", help="benchmarks of the ROS nodes (the DMG core: `dmg graph bench`)")
     verbs = bench.add_subparsers(dest="verb", required=True, metavar="VERB")
     planner_bench.register(verbs)

@@ -1,6 +1,6 @@
 """`dmg graph`: build, query, picture and benchmark Dexterous Manipulation Graphs (no ROS needed).
 
-A SOURCE is a shipped object name (config/objects/<name>), a mesh or point-cloud file, or
+A SOURCE is an object name (<objects folder>/<name>: config/objects or $DMG_OBJECTS_DIR), a mesh or point-cloud file, or
 a graph saved with `dmg graph build -o`. Grasps are given either as a contact on the surface
 `x,y,z,angle_deg` (principal finger on that point, finger angle in the contact's tangent
 frame) or as a gripper pose `x,y,z,qx,qy,qz,qw[,opening]` in the object frame (metres).

@@ -15,6 +15,14 @@ def config_dir() -> Path:
     return Path(os.environ.get("DMG_CONFIG_DIR", REPO_ROOT / "config"))
 
 
+def objects_dir() -> Path:
+    """The objects folder (one <name>/object.yaml per object): the directory DMG_OBJECTS_DIR names,
+    else config_dir()/objects. Read at every call, so a process that sets it before loading an
+    object (or before starting nodes, which inherit it) uses that folder."""
+    folder = os.environ.get("DMG_OBJECTS_DIR")
+    return Path(folder) if folder else config_dir() / "objects"
+
+
 def load_parameter_spec(name: str) -> dict[str, dict[str, Any]]:
     """The `parameters` mapping of config/<name>.yaml (defaults, descriptions, ranges)."""
     path = config_dir() / f"{name}.yaml"

@@ -113,7 +113,7 @@ class ObjectLibrary:
         return parameters
 
     def load_config_object(self, name: str, replace_existing: bool = False, wait: bool = False) -> LoadResult:
-        """A shipped object (config/objects/<name>), at its recommended seed resolution unless configured."""
+        """An object of the objects folder (<objects folder>/<name>), at its recommended seed resolution unless configured."""
         try:
             model = load_object(name)
         except KeyError as error:

@@ -1,4 +1,7 @@
-"""The shipped test objects: metadata under config/objects/<name>/object.yaml.
+"""The objects: metadata under <objects folder>/<name>/object.yaml.
+
+The objects folder is config/objects (the shipped objects) unless DMG_OBJECTS_DIR names another
+(dmg_common.config.objects_dir).
 
 Each object is described as a union of axis-aligned boxes (`parts`, metres, object frame).
 That one description gives the planner an exact watertight mesh (mesh.stl, written by
@@ -14,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from dmg_common.config import config_dir
+from dmg_common.config import objects_dir
 
 COORDINATE_TOLERANCE = 1e-9   # in the parts' units (m): far below any meant size, far above rounding
 TAG_IDS = 587                 # the 36h11 family: ids 0 .. 586
@@ -58,7 +61,7 @@ class ObjectModel:
 
 
 def object_names() -> list[str]:
-    root = config_dir() / "objects"
+    root = objects_dir()
     return sorted(p.parent.name for p in root.glob("*/object.yaml"))
 
 
@@ -72,9 +75,10 @@ class ObjectError(KeyError):
 
 
 def load_object(name: str) -> ObjectModel:
-    path = config_dir() / "objects" / name / "object.yaml"
+    path = objects_dir() / name / "object.yaml"
     if not path.is_file():
-        raise ObjectError(f"unknown object {name!r}: known objects are {', '.join(object_names())}")
+        raise ObjectError(f"unknown object {name!r}: known objects are {', '.join(object_names()) or 'none'} "
+                          f"(in {objects_dir()})")
     try:
         doc = yaml.safe_load(path.read_text())
         if not isinstance(doc, dict):

@@ -6,7 +6,9 @@ Topics:    dmg/graph_markers (visualization_msgs/MarkerArray, transient local): 
            dmg/plan (dmg_interfaces/msg/RepositioningPlan, transient local): the last plan
            dmg/plan_markers (visualization_msgs/MarkerArray, transient local): its contact paths
            /diagnostics (diagnostic_msgs/DiagnosticArray, 1 Hz)
-Parameters: config/planner.yaml (declared with descriptions and ranges).
+Parameters: config/planner.yaml (declared with descriptions and ranges); `objects: ["*"]` (the
+            default) preloads every object of the objects folder, leaving out (with an error
+            in the log that names it and why) any whose object.yaml is broken.
 
 The node only translates: dmg_planner.library holds the objects, builds graphs on a worker
 thread and plans. One thread serves the requests in turn (a plan takes milliseconds; a
@@ -32,12 +34,19 @@ from dmg_common.ros.parameters import declare_from_config
 from dmg_common.ros.waiting import wait_until
 from dmg_planner import ros_conversions as rc
 from dmg_planner.library import LoadStatus, ObjectLibrary, ObjectState, options_from_parameters
+from dmg_planner.objects import object_names
 from dmg_planner.search import PlanStatus
 
 
 def main(argv: list[str] | None = None) -> int:
     return run_node("planner_node", __doc__, "example: planner_node --ros-args -p objects:=[box] -p cache_dir:=/tmp/graphs",
                     argv, PlannerNode)
+
+
+def preload_names(entries) -> list[str]:
+    """The objects to load at start: the `objects` parameter with "*" standing for every object
+    of the objects folder (config/objects or $DMG_OBJECTS_DIR), each name once."""
+    return list(dict.fromkeys(name for entry in entries for name in (object_names() if entry == "*" else [entry])))
 
 
 class PlannerNode(Node):
@@ -63,13 +72,14 @@ class PlannerNode(Node):
         self.create_service(PlanRepositioning, "plan_repositioning", self.on_plan, qos_profile=service_qos,
                             callback_group=group)
         self.create_timer(1.0, self.publish_diagnostics, callback_group=group)
-        for name in values["objects"]:
+        names = preload_names(values["objects"])
+        for name in names:
             result = self.library.load_config_object(name)
-            if result.status != 0:
-                self.get_logger().error(f"preloading {name}: {result.message}")
+            if result.status != 0:   # the object is left out; the others are served
+                self.get_logger().error(f"preloading {name}: {result.message}; the planner goes on without it")
         ready = [o for o in self.library.objects() if o.state == ObjectState.READY]
         self.get_logger().info(f"planner up in {time.perf_counter() - began:.2f} s: {len(ready)} of "
-                               f"{len(values['objects'])} objects ready at start "
+                               f"{len(names)} objects ready at start "
                                f"({sum(o.from_cache for o in ready)} from cache), others building")
 
     # --- services ------------------------------------------------------------------------------

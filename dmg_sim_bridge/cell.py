@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_common.transforms import distance, from_rotation, invert
-from dmg_planner.objects import ObjectModel, load_object
+from dmg_planner.objects import ObjectModel, load_object, object_names
 from dmg_sim_bridge.robot_model import load_robot
 from dmg_sim_bridge.scene import OBJECT_BODY, camera_name, cell_mjcf
 from dmg_sim_bridge.sim_config import ARM_ROLES, SimConfig, load_sim_config
@@ -366,7 +366,8 @@ class Cell:
               grip_force: float = 0.0, restart_clock: bool = False) -> ResetResult:
         """Arms to their home poses, the object held by gripper 1 at `object_in_gripper` (4x4).
 
-        None = the object's default grasp. The gripper is symmetric, so the object is centred
+        An empty `object_name` = `default_object()`; `object_in_gripper` None = the object's
+        default grasp. The gripper is symmetric, so the object is centred
         between the fingers along the grasp axis. On failure the previous scene is kept.
         Simulated time goes on from where it was (a clock behind ROS never runs backwards)
         unless `restart_clock`: then it starts at 0, and what follows does not depend on what
@@ -381,7 +382,7 @@ class Cell:
             object_in_gripper = _finite(object_in_gripper, "object pose")
         previous = (self.object, self.model, copy.copy(self.data)) if self.data is not None else None
         try:
-            object_model, model = self._model_for(object_name or self.config.object)
+            object_model, model = self._model_for(object_name or self.default_object())
             self._bind(object_model, model)
             self.data.time = previous[2].time if previous and not restart_clock else 0.0
             return self._place(object_in_gripper, grip_force or spec.max_force)
@@ -390,6 +391,12 @@ class Cell:
                 self._bind(previous[0], previous[1])
                 self.data = previous[2]
             raise
+
+    def default_object(self) -> str:
+        """The object a reset without a name holds: config/sim.yaml's `object` when the objects
+        folder has it, else the folder's first (a folder of one's own objects, DMG_OBJECTS_DIR)."""
+        names = object_names()
+        return self.config.object if self.config.object in names or not names else names[0]
 
     def _place(self, object_in_gripper: np.ndarray | None, grip_force: float) -> ResetResult:
         model, data = self.model, self.data

@@ -9,6 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# Half-size of a finger's (visual) box across the grasp axis and across the fingers [m]: it runs
+# from the palm to the tip sphere. Tools that check an object against the fingers use it too.
+FINGER_HALF_SECTION = (0.005, 0.007)
+
 
 @dataclass(frozen=True)
 class GripperSpec:
@@ -45,7 +49,7 @@ def gripper_mjcf(prefix: str, spec: GripperSpec = GripperSpec(), body_attributes
             f'<joint name="{prefix}_finger{finger}" type="slide" axis="{sign} 0 0" range="{spec.tip_radius} {travel}" '
             f'damping="5"/>'
             f'<inertial pos="0 0 {spec.finger_length / 2}" mass="{spec.finger_mass}" diaginertia="1e-5 1e-5 1e-5"/>'
-            f'<geom type="box" pos="0 0 {spec.finger_length / 2}" size="0.005 0.007 {spec.finger_length / 2 - spec.tip_radius}" '
+            f'<geom type="box" pos="0 0 {spec.finger_length / 2}" size="{FINGER_HALF_SECTION[0]} {FINGER_HALF_SECTION[1]} {spec.finger_length / 2 - spec.tip_radius}" '
             f'rgba="0.2 0.2 0.2 1" contype="0" conaffinity="0" group="2"/>'
             f'<geom name="{prefix}_tip{finger}" type="sphere" pos="0 0 {spec.finger_length}" size="{spec.tip_radius}" '
             f'condim="6" friction="{friction}" solref="{spec.solref_timeconst} 1" rgba="0.1 0.1 0.1 1"/>'

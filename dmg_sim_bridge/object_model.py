@@ -1,4 +1,4 @@
-"""An object from config/objects as MJCF: its box parts as collision geoms, its AprilTags as textures.
+"""An object of the objects folder as MJCF: its box parts as collision geoms, its AprilTags as textures.
 
 The tag images are generated with cv2.aruco when the scene is built (no binaries in the
 repository) and written next to the generated model. Each tag is a thin visual-only box

@@ -7,7 +7,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -31,6 +31,42 @@ DMG = str(Path(sys.prefix) / "bin" / "dmg")
 def dmg(*args: str, timeout: float = 60.0, **kwargs) -> subprocess.CompletedProcess:
     """Run the `dmg` CLI as a separate process and capture its output."""
     return subprocess.run([DMG, *args], capture_output=True, text=True, timeout=timeout, **kwargs)
+
+
+def side_by_side(*commands: list[str], timeout: float = 60.0) -> list[subprocess.CompletedProcess]:
+    """Run commands as separate processes at the same time and capture their output: commands that
+    mostly wait (on start-up, discovery, a timeout) take as long together as the slowest alone."""
+    started = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+               for command in commands]
+    results = []
+    try:
+        for process in started:
+            out, err = process.communicate(timeout=timeout)
+            results.append(subprocess.CompletedProcess(process.args, process.returncode, out, err))
+        return results
+    finally:
+        for process in started:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+
+
+@pytest.fixture
+def dmg_in_process(capsys: pytest.CaptureFixture) -> Callable[..., subprocess.CompletedProcess]:
+    """`dmg` run inside the test process, its output captured as dmg() captures it: for tests of what a
+    command does rather than of the command as a process, without a fresh interpreter's start-up per call."""
+    from dmg_bringup.cli import main
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        capsys.readouterr()
+        try:
+            code = main(list(args))
+        except SystemExit as exit_:   # argparse's --help and usage errors
+            code = exit_.code
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["dmg", *args], code, out, err)
+
+    return run
 
 
 def helper_command(script: str, *args: str) -> list[str]:

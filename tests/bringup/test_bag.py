@@ -72,8 +72,8 @@ def test_custom_types_are_recorded_with_their_definition(recorded_bag):
     assert plan.object_id == "box" and plan.primitives[0].translation.x == 0.01
 
 
-def test_info_reports_topics_and_counts(recorded_bag):
-    result = dmg("bag", "info", str(recorded_bag))
+def test_info_reports_topics_and_counts(recorded_bag, dmg_in_process):
+    result = dmg_in_process("bag", "info", str(recorded_bag))
     assert result.returncode == 0, result.stderr
     assert f"Topic: /counter | Type: std_msgs/msg/Int32 | Count: {COUNT} |" in result.stdout
     assert "Topic: /plan | Type: dmg_interfaces/msg/RepositioningPlan" in result.stdout
@@ -141,15 +141,15 @@ def test_record_takes_the_publishers_qos_even_when_a_subscriber_named_the_topic_
     assert [m.data for _, m in _bag_messages(bag, "/latched")] == list(range(5))
 
 
-def test_bad_bags_fail_clearly(tmp_path):
-    result = dmg("bag", "info", str(tmp_path / "missing"))
+def test_bad_bags_fail_clearly(tmp_path, dmg_in_process):
+    result = dmg_in_process("bag", "info", str(tmp_path / "missing"))
     assert result.returncode == 2 and "not a rosbag2 bag" in result.stderr
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 9}\n")
-    result = dmg("bag", "play", str(broken))
+    result = dmg_in_process("bag", "play", str(broken))
     assert result.returncode == 2 and "cannot open" in result.stderr and "Traceback" not in result.stderr
-    result = dmg("bag", "record", "-o", str(broken), "/x")
+    result = dmg_in_process("bag", "record", "-o", str(broken), "/x")
     assert result.returncode == 2 and "exists already" in result.stderr
-    result = dmg("bag", "play", str(broken), "--rate", "0")
+    result = dmg_in_process("bag", "play", str(broken), "--rate", "0")
     assert result.returncode == 2 and "--rate must be > 0" in result.stderr

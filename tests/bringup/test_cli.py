@@ -1,4 +1,4 @@
-"""The `dmg` CLI against other real processes: run, topic, service, and its errors."""
+"""The `dmg` CLI against other real processes: run, topic, service; its help and usage errors in the test's process."""
 from __future__ import annotations
 
 import json
@@ -10,17 +10,17 @@ import pytest
 import yaml
 from ament_index_python.packages import get_package_prefix
 
-from conftest import DMG, dmg, helper_command
+from conftest import DMG, dmg, helper_command, side_by_side
 from dmg_bringup.layout import declared_executables
 
 pytestmark = pytest.mark.ros
 
 
-def test_help_everywhere():
+def test_help_everywhere(dmg_in_process):
     for command in [[], ["run"], ["topic"], ["topic", "echo"], ["topic", "hz"], ["topic", "pub"],
                     ["topic", "list"], ["service", "call"], ["action", "send_goal"], ["bag", "record"],
                     ["bag", "info"], ["bag", "play"], ["up"]]:
-        result = dmg(*command, "--help")
+        result = dmg_in_process(*command, "--help")
         assert result.returncode == 0 and result.stdout.startswith("usage: dmg"), command
 
 
@@ -28,10 +28,9 @@ def test_help_everywhere():
 def test_executables_resolve_like_ros2_run(node):
     """ros2run: <get_package_prefix(pkg)>/lib/<pkg>/<exe> must be an executable file."""
     path = f"{get_package_prefix(node.package)}/lib/{node.package}/{node.executable}"
-    result = subprocess.run([path, "--help"], capture_output=True, text=True, timeout=60)
+    result, via_dmg = side_by_side([path, "--help"], [DMG, "run", node.package, node.executable, "--help"])
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith(f"usage: {node.executable}")
-    via_dmg = dmg("run", node.package, node.executable, "--help")
     assert via_dmg.returncode == 0 and via_dmg.stdout == result.stdout
 
 
@@ -42,25 +41,27 @@ def test_ament_index_holds_every_node_package():
         assert package in packages, package
 
 
-def test_run_unknown_package_or_executable_fails_clearly():
-    result = dmg("run", "no_such_package", "node")
+def test_run_unknown_package_or_executable_fails_clearly(dmg_in_process):
+    result = dmg_in_process("run", "no_such_package", "node")
     assert result.returncode == 2 and "package 'no_such_package' not found" in result.stderr
-    result = dmg("run", "dmg_planner", "no_such_node")
+    result = dmg_in_process("run", "dmg_planner", "no_such_node")
     assert result.returncode == 2 and "available: planner_node" in result.stderr
 
 
 def test_topic_echo_once_sees_another_process(processes):
-    processes.start(helper_command("talker.py", "--topic", "/counter", "--count", "5", "--forever"))
-    result = dmg("topic", "echo", "/counter", "--once", "--timeout", "20")
+    processes.start(helper_command("talker.py", "--topic", "/counter", "--count", "5", "--forever",
+                                   "--start-delay", "0"))
+    result, as_json = side_by_side(
+        [DMG, "topic", "echo", "/counter", "--once", "--timeout", "20"],
+        [DMG, "topic", "echo", "/counter", "std_msgs/msg/Int32", "--json", "-n", "2", "--timeout", "20"])
     assert result.returncode == 0, result.stderr
     assert result.stdout.endswith("---\n")
     assert isinstance(yaml.safe_load(result.stdout.split("---")[0])["data"], int)
 
-    as_json = dmg("topic", "echo", "/counter", "std_msgs/msg/Int32", "--json", "-n", "2", "--timeout", "20")
     assert as_json.returncode == 0, as_json.stderr
     assert [set(json.loads(line)) for line in as_json.stdout.splitlines()] == [{"data"}, {"data"}]
 
-    listing = dmg("topic", "list", "-t", "--spin-time", "8")
+    listing = dmg("topic", "list", "-t", "--spin-time", "3")   # the talker is up: it has been heard
     assert "/counter [std_msgs/msg/Int32]" in listing.stdout.splitlines()
 
 
@@ -77,15 +78,17 @@ def test_topic_echo_started_before_a_latched_publisher_gets_its_history(processe
 
 
 def test_topic_hz_measures_the_publish_rate(processes):
-    processes.start(helper_command("talker.py", "--topic", "/fast", "--count", "400", "--gaps", "0.02"))
-    result = dmg("topic", "hz", "/fast", "--duration", "4")
+    processes.start(helper_command("talker.py", "--topic", "/fast", "--count", "400", "--gaps", "0.02",
+                                   "--start-delay", "0"))
+    result = dmg("topic", "hz", "/fast", "--duration", "3")
     rates = [float(r) for r in re.findall(r"average rate: ([0-9.]+)", result.stdout)]
     assert rates, result.stdout + result.stderr
     assert 25.0 < rates[-1] < 60.0  # 50 Hz nominal; sleep jitter on a loaded machine slows it
 
 
 def test_csv_output_flattens_fields(processes):
-    processes.start(helper_command("talker.py", "--topic", "/counter", "--count", "3", "--forever"))
+    processes.start(helper_command("talker.py", "--topic", "/counter", "--count", "3", "--forever",
+                                   "--start-delay", "0"))
     result = dmg("topic", "echo", "/counter", "std_msgs/msg/Int32", "--csv", "--once", "--timeout", "20")
     assert result.returncode == 0 and re.fullmatch(r"\d+\n", result.stdout)
 
@@ -107,15 +110,16 @@ def test_csv_output_flattens_fields(processes):
     (["eval", "--objects", "nope"], "unknown object(s) nope"),
     (["eval", "--alphas", "-0.5"], "alphas in [0, 1]"),
 ])
-def test_bad_input_gives_a_clear_error(args, message):
-    result = dmg(*args)
+def test_bad_input_gives_a_clear_error(args, message, dmg_in_process):
+    result = dmg_in_process(*args)
     assert result.returncode == 2, result.stdout
     assert message in result.stderr and result.stderr.startswith("dmg ")
     assert "Traceback" not in result.stderr
 
 
 def test_missing_server_is_exit_1_not_a_hang():
-    result = dmg("service", "call", "/nobody", "std_srvs/srv/Trigger", "--timeout", "1")
-    assert result.returncode == 1 and "not available within 1.0 s" in result.stderr
-    result = dmg("action", "send_goal", "/nobody", "dmg_interfaces/action/ExecuteRepositioning", "--timeout", "1")
-    assert result.returncode == 1 and "not available" in result.stderr
+    service, action = side_by_side(
+        [DMG, "service", "call", "/nobody", "std_srvs/srv/Trigger", "--timeout", "1"],
+        [DMG, "action", "send_goal", "/nobody", "dmg_interfaces/action/ExecuteRepositioning", "--timeout", "1"])
+    assert service.returncode == 1 and "not available within 1.0 s" in service.stderr
+    assert action.returncode == 1 and "not available" in action.stderr

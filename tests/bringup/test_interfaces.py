@@ -6,16 +6,21 @@ import json
 import pytest
 import yaml
 
-from conftest import DMG, dmg, helper_command
+from conftest import DMG, Processes, dmg, helper_command
 
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture
-def servers(processes):
-    server = processes.start(helper_command("interface_servers.py"))
-    assert server.stdout.readline().strip() == "serving"
-    return server
+@pytest.fixture(scope="module")
+def servers():
+    """One echoing server process for every round trip; each round trip is a client process of its own."""
+    procs = Processes()
+    try:
+        server = procs.start(helper_command("interface_servers.py"))
+        assert server.stdout.readline().strip() == "serving"
+        yield server
+    finally:
+        procs.stop_all()
 
 
 def _message_json(stdout: str) -> dict:

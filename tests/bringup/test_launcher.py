@@ -11,7 +11,7 @@ import psutil
 import pytest
 import yaml
 
-from conftest import DMG, HELPERS
+from conftest import DMG, HELPERS, RosTestNode
 
 pytestmark = pytest.mark.ros
 
@@ -42,11 +42,20 @@ def _all_gone(processes: list[psutil.Process], timeout: float = 15.0) -> bool:
     return not alive
 
 
+def _wait_publishing(*topics: str) -> None:
+    """Until every topic has a publisher in the ROS graph: the children are running nodes, past their imports."""
+    probe = RosTestNode("launcher_probe")
+    try:
+        probe.wait_for(lambda: all(probe.node.count_publishers(t) for t in topics), what=f"publishers of {topics}")
+    finally:
+        probe.close()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_signal_stops_every_child(tmp_path, sig):
     launch = _launch_file(tmp_path, [_talker("talker_a", "/a"), _talker("talker_b", "/b")])
     up, children = _start_up(launch)
-    time.sleep(3.0)
+    _wait_publishing("/a", "/b")
     up.send_signal(sig)
     out, _ = up.communicate(timeout=30)
     assert up.returncode == 0, out
@@ -82,7 +91,9 @@ def test_optional_node_may_exit(tmp_path):
         _talker("talker", "/t"),
     ])
     up, children = _start_up(launch)
-    time.sleep(3.0)
+    once = next(c for c in children if "print('done')" in " ".join(c.cmdline()))
+    assert _all_gone([once])
+    time.sleep(0.5)           # five passes of the launcher's watch loop
     assert up.poll() is None  # still running after the optional node ended
     up.send_signal(signal.SIGTERM)
     up.communicate(timeout=30)
@@ -121,8 +132,8 @@ def test_package_nodes_get_their_name_and_parameters(tmp_path):
     ("nodes: [{name: x, package: dmg_planner, executable: nope}]", "no executable 'nope'"),
     ("nodes: [{name: x}]", "needs 'package' + 'executable' or a 'command'"),
 ])
-def test_bad_launch_files_fail_clearly(tmp_path, content, message):
+def test_bad_launch_files_fail_clearly(tmp_path, content, message, dmg_in_process):
     path = tmp_path / "bad.yaml"
     path.write_text(content)
-    result = subprocess.run([DMG, "up", "--config", str(path)], capture_output=True, text=True, timeout=60)
+    result = dmg_in_process("up", "--config", str(path))
     assert result.returncode == 2 and message in result.stderr

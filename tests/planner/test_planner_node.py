@@ -9,7 +9,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes, dmg
+from conftest import DMG, Processes, side_by_side
 
 pytestmark = pytest.mark.ros
 
@@ -291,16 +291,16 @@ def test_latched_topics_and_diagnostics(planner, graphs):
     _, client = planner
     box = graphs["box"]
     assert client.plan("box", grasp_pose(box, [-0.02, 0.0, 0.02], np.pi), grasp_pose(box, [0.03, 0.0, 0.02], np.pi)).success
-    # Late subscribers get the last plan and the graphs (transient local).
-    echo = dmg("topic", "echo", "/dmg/plan", "--once", "--timeout", "10")
+    # Late subscribers get the last plan and the graphs (transient local); three at once, each
+    # a process of its own that mostly waits for discovery.
+    echo, markers, diagnostics = side_by_side(*([DMG, "topic", "echo", topic, "--once", "--timeout", "10"]
+                                                for topic in ("/dmg/plan", "/dmg/graph_markers", "/diagnostics")))
     assert echo.returncode == 0, echo.stderr
     last = yaml.safe_load(echo.stdout.split("\n---")[0])
     assert last["object_id"] == "box" and last["primitives"][0]["kind"] == 1
-    markers = dmg("topic", "echo", "/dmg/graph_markers", "--once", "--timeout", "10")
     assert markers.returncode == 0, markers.stderr
     for name in ("box", "plug", "bracket"):
         assert f"ns: {name}/vertices" in markers.stdout and f"ns: {name}/edges" in markers.stdout
-    diagnostics = dmg("topic", "echo", "/diagnostics", "--once", "--timeout", "10")
     assert diagnostics.returncode == 0 and "supervoxels" in diagnostics.stdout and "plans_served" in diagnostics.stdout
 
 
