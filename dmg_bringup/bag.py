@@ -213,10 +213,11 @@ def play(args: argparse.Namespace) -> int:
         clock_pub = node.create_publisher(Clock, "/clock", 10) if args.clock else None
         clock_period = 1.0 / args.clock if args.clock else math.inf
         if args.wait_subscribers:
+            awaited = {**publishers, **({"/clock": clock_pub} if clock_pub else {})}
             deadline = time.monotonic() + args.wait_subscribers
-            while any(p.get_subscription_count() == 0 for p in publishers.values()):
+            while any(p.get_subscription_count() == 0 for p in awaited.values()):
                 if time.monotonic() > deadline:
-                    idle = [t for t, p in publishers.items() if p.get_subscription_count() == 0]
+                    idle = [t for t, p in awaited.items() if p.get_subscription_count() == 0]
                     return error("bag play", f"no subscriber on {', '.join(idle)} within "
                                              f"{args.wait_subscribers} s", 1)
                 rclpy.spin_once(node, timeout_sec=0.05)
@@ -278,5 +279,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--delay", type=float, default=DISCOVERY_WAIT,
                    help="wait before the first message, after --wait-subscribers found its subscribers, so they match us too [s] (default 1)")
     p.add_argument("--wait-subscribers", type=float, metavar="TIMEOUT",
-                   help="start only when every replayed topic has a subscriber (exit 1 after TIMEOUT s)")
+                   help="start only when every replayed topic (and /clock with --clock) has a subscriber (exit 1 after TIMEOUT s)")
     p.set_defaults(handler=play)

@@ -16,7 +16,7 @@ from conftest import DMG, dmg, helper_command
 pytestmark = pytest.mark.ros
 
 GAPS = ["0.05", "0.15", "0.10"]  # irregular on purpose: a replay must keep each gap
-COUNT = 30
+COUNT = 20
 
 
 @pytest.fixture(scope="module")
@@ -29,13 +29,13 @@ def recorded_bag(tmp_path_factory):
         recorder = procs.start([DMG, "bag", "record", "-o", str(bag), "/counter", "/plan"])
         talker = procs.start(helper_command("talker.py", "--topic", "/counter", "--count", str(COUNT),
                                             "--gaps", *GAPS, "--wait-subscribers", "1",
-                                            "--start-delay", "1"))
+                                            "--start-delay", "0.5"))
         # Published until the recording stops: a recorder slow to start (a loaded machine) still gets some.
         procs.start([DMG, "topic", "pub", "/plan", "dmg_interfaces/msg/RepositioningPlan",
                      "{object_id: box, cost: 0.5, primitives: [{kind: 1, translation: {x: 0.01}}]}",
                      "-r", "4"])
         talker.wait(timeout=60)
-        time.sleep(1.0)
+        time.sleep(0.5)
         recorder.send_signal(signal.SIGINT)
         out, err = recorder.communicate(timeout=30)
         assert recorder.returncode == 0, out + err
@@ -102,11 +102,14 @@ def test_play_replays_same_messages_with_recorded_timing(recorded_bag, processes
     assert statistics.median(np.abs(replayed_gaps - recorded_gaps) / recorded_gaps) < 0.10
 
 
-def test_play_publishes_clock_when_asked(recorded_bag):
+def test_play_publishes_clock_when_asked(recorded_bag, processes, tmp_path):
+    """/clock carries bag time; --wait-subscribers waits for a /clock subscriber as for the replayed topics."""
     import subprocess
     echo = subprocess.Popen([DMG, "topic", "echo", "/clock", "rosgraph_msgs/msg/Clock", "--json", "-n", "5",
                              "--timeout", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    result = dmg("bag", "play", str(recorded_bag), "--clock", "50", "--delay", "2.5", "--topics", "/counter")
+    processes.start(helper_command("listener.py", "--topic", "/counter", "--out", str(tmp_path / "got")))
+    result = dmg("bag", "play", str(recorded_bag), "--clock", "50", "--rate", "4", "--wait-subscribers", "30",
+                 "--delay", "0.5", "--topics", "/counter")
     out, err = echo.communicate(timeout=40)
     assert result.returncode == 0 and echo.returncode == 0, err
     import json
@@ -123,7 +126,7 @@ def test_record_takes_the_publishers_qos_even_when_a_subscriber_named_the_topic_
     listener = processes.start(helper_command("listener.py", "--topic", "/latched", "--out", str(tmp_path / "got")))
     assert listener.stdout.readline().strip() == "listening"      # a subscriber names the topic first
     recorder = processes.start([DMG, "bag", "record", "-o", str(bag), "/latched"])
-    time.sleep(2.0)  # several discovery passes of the recorder with a subscriber and no publisher
+    time.sleep(1.2)  # two discovery passes of the recorder (every 0.5 s) with a subscriber and no publisher
     # Publishes 0..4 at once, then stays up: the recorder must subscribe late and get them as history.
     talker = processes.start(helper_command("talker.py", "--topic", "/latched", "--latched", "--count", "5",
                                             "--gaps", "0.01", "0.01", "0.01", "0.01", "30.0", "--start-delay", "0"))

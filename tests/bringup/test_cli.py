@@ -61,14 +61,14 @@ def test_topic_echo_once_sees_another_process(processes):
     assert as_json.returncode == 0, as_json.stderr
     assert [set(json.loads(line)) for line in as_json.stdout.splitlines()] == [{"data"}, {"data"}]
 
-    listing = dmg("topic", "list", "-t", "--spin-time", "3")   # the talker is up: it has been heard
+    listing = dmg("topic", "list", "-t", "--spin-time", "1.5")   # the talker is up: it has been heard
     assert "/counter [std_msgs/msg/Int32]" in listing.stdout.splitlines()
 
 
 def test_topic_echo_started_before_a_latched_publisher_gets_its_history(processes):
     echo = subprocess.Popen([DMG, "topic", "echo", "/latched", "std_msgs/msg/Int32", "--json", "-n", "3",
                              "--timeout", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)          # echo is up and waiting before anything publishes
+    time.sleep(1.5)          # echo is up and waiting before anything publishes
     # Publishes 0, 1, 2 at once, then stays up 4 s: only a transient-local subscription gets them all.
     processes.start(helper_command("talker.py", "--topic", "/latched", "--latched", "--count", "3",
                                    "--gaps", "0.001", "0.001", "4.0", "--start-delay", "0"))
@@ -80,7 +80,7 @@ def test_topic_echo_started_before_a_latched_publisher_gets_its_history(processe
 def test_topic_hz_measures_the_publish_rate(processes):
     processes.start(helper_command("talker.py", "--topic", "/fast", "--count", "400", "--gaps", "0.02",
                                    "--start-delay", "0"))
-    result = dmg("topic", "hz", "/fast", "--duration", "3")
+    result = dmg("topic", "hz", "/fast", "--duration", "2")
     rates = [float(r) for r in re.findall(r"average rate: ([0-9.]+)", result.stdout)]
     assert rates, result.stdout + result.stderr
     assert 25.0 < rates[-1] < 60.0  # 50 Hz nominal; sleep jitter on a loaded machine slows it

@@ -73,7 +73,9 @@ def test_children_die_with_a_killed_launcher(tmp_path):
 
 def test_logs_are_prefixed_and_a_required_exit_stops_all(tmp_path):
     launch = _launch_file(tmp_path, [
-        {"name": "short", "command": [sys.executable, "-c", "print('hello from short')"]},
+        # (it lives a moment: on a loaded machine a node that ends at once may be gone, and the launcher may
+        # have stopped the others, before the children are listed)
+        {"name": "short", "command": [sys.executable, "-c", "import time; time.sleep(1.0); print('hello from short')"]},
         _talker("talker", "/t"),
     ])
     up, children = _start_up(launch)
