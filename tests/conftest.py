@@ -13,8 +13,10 @@ from pathlib import Path
 import pytest
 
 # Each pytest process gets its own ROS domain and stays on this host, so parallel runs
-# (and other ROS users on the network) never see each other's nodes.
-os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 100)
+# (and other ROS users on the network) never see each other's nodes. pytest-xdist's workers
+# ("gw0", "gw1", ...) of one run are children of its controller and take consecutive domains.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "")
+os.environ["ROS_DOMAIN_ID"] = str(1 + (os.getppid() + int(_WORKER[2:]) if _WORKER else os.getpid()) % 100)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 # MuJoCo picks its GL backend when first imported: headless EGL before any test imports it.
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -24,6 +26,14 @@ from dmg_common.environment import apply_ros_environment  # noqa: E402
 apply_ros_environment()
 
 REPO = Path(__file__).resolve().parent.parent
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """Workers for `-n auto` (the default, pyproject.toml): one per CPU when simulation tests run, each
+    keeps a CPU busy; one more when they are deselected (`-m "not sim"`): the process tests mostly wait
+    on DDS discovery, timers and replays."""
+    cpus = os.cpu_count() or 1
+    return cpus + 1 if "not sim" in (config.getoption("markexpr") or "") else cpus
 HELPERS = Path(__file__).resolve().parent / "helpers"
 DMG = str(Path(sys.prefix) / "bin" / "dmg")
 
