@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from dmg_common.transforms import turn_between
 from dmg_executor.contract import Command, GripCommand, Observation
 from dmg_executor.ects import arm_twists
-from dmg_executor.grip import tilt_hold_force
+from dmg_executor.grip import GRAVITY, tilt_hold_force
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 
@@ -77,6 +77,16 @@ def loosened_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Obser
     tilt_hold = s.grip.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
                                                      surface.mass, obs.opening, s.grip.friction)
     return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.grip.slide_force, s.grip.hold_force)))
+
+
+def carrying_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Observation, way: np.ndarray) -> GripCommand:
+    """The loosened grip of a carry along `way` (holder frame, unit): finger distance as `loosened_grip`, at
+    the force whose friction holds `carry.weight_share` of the object's weight along `way`, the rest left on
+    the pusher's tips below it."""
+    s = settings
+    weight = surface.mass * float(np.clip((obs.holder[:3, :3].T @ GRAVITY) @ way, 0.0, None))
+    force = s.carry.weight_share * weight / (2.0 * s.grip.friction)
+    return GripCommand(loosened_grip(s, surface, obs).opening, float(min(force, s.grip.hold_force)))
 
 
 class Pilot:

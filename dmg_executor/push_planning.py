@@ -9,6 +9,7 @@ axis; a level press pushes along the grasp axis to turn the object back about an
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -16,7 +17,8 @@ from scipy.spatial.transform import Rotation
 from dmg_common.transforms import apply, from_rotation, invert
 from dmg_executor.contract import Observation
 from dmg_executor.fingertips import fingertip_shells, meeting_start, push_start, sweep_to_touch
-from dmg_executor.motion import Route
+from dmg_executor.grip import GRAVITY, tilt_hold_force
+from dmg_executor.motion import Route, carrying_grip
 from dmg_executor.push_points import PushError, PushPoint, exit_normals, rotation_push, straddle_push, translation_push
 from dmg_executor.routes import KeepOut, RouteError
 from dmg_executor.run import Push, Run
@@ -75,11 +77,25 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
                 pushes.append(_straddle_point(run, holder_in_object))
             except PushError as error:
                 problems.append(str(error))
+        if s.carry.enabled:
+            try:
+                pushes += _carry_point(run, obs, holder_in_object, motion)
+            except PushError as error:
+                problems.append(str(error))
         if not pushes:
             raise PushError("; ".join(problems))
-        candidates = _watched(run, obs, pushes, occluders)
-        # The most progress: the full motion when the camera can watch it.
-        return max(candidates, key=lambda c: float(motion @ (invert(obs.holder)[:3, :3] @ c[0].direction)))[0]
+        try:
+            candidates = _watched(run, obs, pushes, occluders)
+        except (PushError, RouteError) as error:
+            raise PushError("; ".join([*problems, str(error)])) from None
+        # A carry needs the camera on it: nothing else tells that the object follows the tips down.
+        candidates = [c for c in candidates if c[1] > 0 or not c[0].carry or not run.sight.modelled]
+        if not candidates:
+            raise PushError("; ".join([*problems, ("the wrist camera would see none of the object's tags where "
+                                                   "the only push, a carry, starts")]))
+        # The most progress: the full motion when the camera can watch it; a push rather than a carry unless
+        # the carry goes a tolerance further (a push's force is the pusher's own, a carry's the weight's share).
+        return max(candidates, key=lambda c: float(motion @ c[0].motion) - s.tolerances.position * c[0].carry)[0]
     limited = float(np.clip(run.campaign.errors[1], -s.push.max_angle, s.push.max_angle))
     # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
     # goes across the fingers (beyond their tips, or between them towards the palm where that
@@ -127,6 +143,52 @@ def _straddle_point(run: Run, holder_in_object: np.ndarray) -> PushPoint:
         raise PushError(f"the straddle push's face is {depth * 1000:.0f} mm towards gripper 1's palm (the pusher's "
                         f"fingers fit up to {room * 1000:.0f} mm)")
     return push
+
+
+def _carry_point(run: Run, obs: Observation, holder_in_object: np.ndarray, motion: np.ndarray) -> list[PushPoint]:
+    """The carry for what of `motion` (holder frame) goes down along gripper 1's fingers, if that is more than
+    the tolerance: on the face below the grasp's middle, which the pusher's tips meet from below and then
+    let down (none when the motion has no such share)."""
+    s = run.settings
+    down = obs.holder[:3, :3].T @ GRAVITY / np.linalg.norm(GRAVITY)      # holder frame
+    way = down.copy()
+    way[0] = 0.0                                 # (along the grasp axis the fingers centre the object)
+    share = float(np.linalg.norm(way))
+    if share < 1e-6 or float(motion @ way) / share <= s.tolerances.position:
+        return []
+    if share < np.cos(s.carry.cone):
+        raise PushError(f"no carry: across the grasp axis, straight down is {np.rad2deg(np.arccos(share)):.0f} deg "
+                        f"away (limit {np.rad2deg(s.carry.cone):.0f} deg)")
+    way /= share
+    if run.surface.mass <= 0.0:
+        raise PushError("no carry: the object's mass is not known (0 kg), nor so the grip that lets it down")
+    # The carrying grip must still hold the object from tilting off the grasp axis, with the margin the
+    # loosened grip of a push keeps (`grip.tilt_hold_margin`); where that grip would be more than the one
+    # that lets the object down, no carry.
+    letting_down = carrying_grip(s, run.surface, obs, way).max_force
+    holding_tilt = s.grip.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3],
+                                                             run.surface.centre_of_mass, run.surface.mass,
+                                                             obs.opening, s.grip.friction)
+    if holding_tilt > letting_down:
+        raise PushError(f"no carry: the grip that keeps the object from tilting ({holding_tilt:.2f} N) would hold "
+                        f"more than the share of its weight that lets it come down ({letting_down:.2f} N)")
+    # The tips carry (1 - share) of the weight, the grip's friction on the grasp axis the rest: on the line
+    # (along `way`) that far beside the grasp axis whose torque about it balances the weight's at the centre
+    # of mass, the object does not turn as it comes down; on the line through the grasp's middle if that
+    # misses the object.
+    across = np.cross(way, [1.0, 0.0, 0.0])
+    centre = apply(obs.object_in_holder, run.surface.centre_of_mass)
+    balance = float(centre @ across) / max(1.0 - s.carry.weight_share, 0.05)
+    problems = []
+    for offset in (balance, 0.0):
+        try:
+            point = translation_push(run.surface, holder_in_object[:3, 3] + holder_in_object[:3, :3] @ (offset * across),
+                                     holder_in_object[:3, :3] @ way, s.push.translation_slant)
+        except PushError as error:
+            problems.append(str(error))
+            continue
+        return [replace(point, carry=True)]
+    raise PushError("no carry: " + "; ".join(problems))
 
 
 def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:

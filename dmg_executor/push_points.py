@@ -29,6 +29,7 @@ class PushPoint:
     normal: np.ndarray      # outward surface normal there
     direction: np.ndarray   # unit direction the pusher moves (and the object with it), object frame
     spread: float = 0.0     # m between the pusher's fingertip centres: 0 = closed (side by side, touching)
+    carry: bool = False     # the tips hold the face from below and move away from it: the object follows, let down
 
 
 class ObjectSurface:

@@ -39,6 +39,17 @@ class Push:
         """The pusher's fingertip spread [m] for this push (0: closed; a straddle push opens them)."""
         return self.contact.spread
 
+    @property
+    def carry(self) -> bool:
+        """A carry: the tips meet the face along `direction`, then move back the way they came, the object
+        following under its weight."""
+        return self.contact.carry
+
+    @property
+    def motion(self) -> np.ndarray:
+        """The way the object is moved (holder frame): along the push, or opposite to it for a carry."""
+        return -self.local_direction if self.carry else self.local_direction
+
 
 @dataclass
 class Pushed:
@@ -60,6 +71,17 @@ class PushMemory:
     unreachable: list[np.ndarray] = field(default_factory=list)   # push directions (base frame) not reached
     shortfalls: list[tuple[np.ndarray, float]] = field(default_factory=list)   # (holder-frame direction, m)
     missed: list[PushPoint] = field(default_factory=list)
+    lost_on_the_way: list[np.ndarray] = field(default_factory=list)   # push directions (base frame) whose way lost the object
+
+    def lost_again(self, direction: np.ndarray, settings: ExecutorSettings) -> bool:
+        """The object went unseen on the way to a push along `direction` (base frame): has a push this way
+        lost it before? Then this way is taken as one the pusher cannot get to; else it is remembered."""
+        cone = np.cos(settings.campaign.unreachable_cone)
+        if any(float(past @ direction) >= cone for past in self.lost_on_the_way):
+            self.unreachable.append(direction)
+            return True
+        self.lost_on_the_way.append(direction)
+        return False
 
     def shortfall(self, direction: np.ndarray, settings: ExecutorSettings) -> float:
         """How much further on than its pose says the object has been met by blind pushes this way (0 to `gap`)."""
@@ -92,6 +114,7 @@ class Search:
     searching: bool = False         # it went unseen on the way to a push: look for it
     seeking_certain: bool = False   # ... or the plan's end is to be judged from an uncertain pose: look for a certain one
     sought_certain: bool = False    # a look for a certain pose was made since the last push
+    slip_doubted: bool = False      # a slip seen with nothing touching the object was looked at again since the last push
 
 
 class Run:

@@ -151,6 +151,16 @@ class StraddleSettings:
 
 
 @dataclass(frozen=True)
+class CarrySettings:
+    """Carries: the object let down along gripper 1's fingers on the pusher's tips (`carry.*`)."""
+
+    enabled: bool
+    weight_share: float
+    cone: float                    # rad
+    follow_lag: float
+
+
+@dataclass(frozen=True)
 class ViewSettings:
     """Which tags the wrist camera would see from a pusher pose (`views.*`)."""
 
@@ -263,6 +273,7 @@ class ExecutorSettings:
     look: LookSettings
     level: LevelSettings
     straddle: StraddleSettings
+    carry: CarrySettings
     views: ViewSettings
     limits: LimitSettings
     gripper: GripperSettings

@@ -8,11 +8,11 @@ import numpy as np
 
 from dmg_common.transforms import apply, invert, turn_between
 from dmg_executor.campaign import slid_since, turned_since
-from dmg_executor.contract import Command, Observation, Step
+from dmg_executor.contract import Command, GripCommand, Observation, Step
 from dmg_executor.fingertips import leading_tip, sweep_to_touch
 from dmg_executor.grip import tilt_steering
 from dmg_executor.monitors import tilt_since, turn_since
-from dmg_executor.motion import coordinated, held_grip, loosened_grip
+from dmg_executor.motion import carrying_grip, coordinated, held_grip, loosened_grip
 from dmg_executor.pushed import mark_missed
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.run import Pushed, Run
@@ -22,8 +22,9 @@ from dmg_planner.primitives import PrimitiveKind
 
 
 class Phase(Enum):
-    LOOSEN = "loosen"       # the holder's fingers opening to the slide force (held tight for a level press)
-    TOUCH = "touch"         # the pusher closing its gap to the face along the push line
+    LOOSEN = "loosen"       # the holder's fingers opening to the slide force (held tight for a level press;
+                            # for a carry, after the touch, to the force that leaves the object on the tips)
+    TOUCH = "touch"         # the pusher closing its gap to the face along the push line (first, for a carry)
     PUSH = "push"           # moving the object under P control on what is left
     TIGHTEN = "tighten"     # the grip closing again before the pusher leaves
 
@@ -33,7 +34,9 @@ class Execute(State):
     remaining contact displacement, or a rotation about the grasp axis at a P-controlled rate, the pusher
     following the object on its arc, or a level press - split between the arms by the ECTS coordination
     alpha. While pushing, the object pose is the last seen one moved on by the pusher's motion since its
-    image (reckoning): a push the camera cannot watch goes on blind and the next pose checks it."""
+    image (reckoning): a push the camera cannot watch goes on blind and the next pose checks it. A carry
+    (a translation down along gripper 1's fingers) touches the face below the object first, with the grip
+    held, then loosens it so that the object rests partly on the tips, and lets it down with them."""
 
     step = Step.EXECUTE
 
@@ -42,10 +45,20 @@ class Execute(State):
         self.grip_until = 0.0
         self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
         self.sweep_to_face = 0.0   # rad a rotation's pusher turns before its tips meet the face (as seen when it began)
+        self.carried_from: tuple[np.ndarray, np.ndarray] | None = None   # (pusher, object) positions, holder frame,
+        #                                                          when a carry began to let the object down
+        self.line_offset = 0.0     # m across the push line from the grasp axis where the touching tip is kept
 
     def enter(self, run: Run, obs: Observation) -> None:
         run.pushed = None
-        self.grip_until = obs.time + run.settings.grip.settle
+        run.search.slip_doubted = False     # (the push touches the object: a slip after it is a new question)
+        if run.push.carry:     # the tips go under the face with the grip held, then it loosens
+            push = run.push
+            self.line_offset = float(apply(obs.object_in_holder, push.contact.point)
+                                     @ np.cross(push.local_direction, [1.0, 0.0, 0.0]))
+            self._begin(run, obs)
+        else:
+            self.grip_until = obs.time + run.settings.grip.settle
 
     @property
     def pushing(self) -> bool:
@@ -59,15 +72,22 @@ class Execute(State):
         return self._tighten(run, obs)
 
     def tick(self, run: Run, obs: Observation) -> Command | Transition:
-        leveling = run.campaign.leveling
+        leveling, carry = run.campaign.leveling, run.push.carry
         if self.phase == Phase.LOOSEN:
             if obs.time < self.grip_until:
-                return Command(holder_grip=held_grip(run.settings) if leveling else loosened_grip(run.settings, run.surface, obs))
-            self._begin(run, obs)
+                return Command(holder_grip=self._pushing_grip(run, obs))
+            if carry:
+                self.phase = Phase.PUSH
+                self.carried_from = (apply(invert(obs.holder), obs.pusher[:3, 3]), obs.object_in_holder[:3, 3].copy())
+            else:
+                self._begin(run, obs)
         if self.phase == Phase.TOUCH:
             command = self._touch(run, obs)
             if command is not None:
                 return command
+            if carry:      # the tips are under the face: the loosened grip lets the object down onto them
+                self.phase, self.grip_until = Phase.LOOSEN, obs.time + run.settings.grip.settle
+                return Command(holder_grip=self._pushing_grip(run, obs))
         if self.phase == Phase.TIGHTEN:
             if obs.time < self.grip_until:
                 return Command()
@@ -93,7 +113,8 @@ class Execute(State):
         face = apply(obs.object_in_holder, push.contact.point)
         reckoning = Reckoning(reference.copy(), pusher, apply(invert(pusher), face - s.push.gap * along),
                               face + run.memory.shortfall(along, s) * along,
-                              np.zeros(3) if campaign.leveling else along.copy(),   # (a level push: believed unmoved)
+                              # (a level press or a carry: believed unmoved; a carry is never blind)
+                              np.zeros(3) if campaign.leveling or push.carry else along.copy(),
                               turning=campaign.primitive.kind == PrimitiveKind.ROTATION)
         reckoning.moved(obs.time, pusher)
         run.pushed = Pushed(reference, pusher.copy(), along.copy(), push.contact, obs.opening, reckoning)
@@ -133,7 +154,7 @@ class Execute(State):
             met = met or abs(turned_since(pushed.reference, seen)) > s.push.turn_gain
         if closed < s.push.gap - short and not met:
             command = coordinated(obs, np.concatenate([s.push.speed * push.direction, np.zeros(3)]), run.alpha)
-            command.holder_grip = held_grip(s) if campaign.leveling else loosened_grip(s, run.surface, obs)
+            command.holder_grip = held_grip(s) if campaign.leveling or push.carry else loosened_grip(s, run.surface, obs)
             return command
         self.phase = Phase.PUSH
         if rotation and not campaign.leveling:
@@ -156,16 +177,21 @@ class Execute(State):
                 and obs.object_tilt_sigma <= s.slip.tilt_sigma):
             return self._stop(run, obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if campaign.primitive.kind == PrimitiveKind.TRANSLATION:
-            along = float(campaign.remaining_motion(obs) @ (holder[:3, :3].T @ push.direction))
+            moving = -push.direction if push.carry else push.direction
+            along = float(campaign.remaining_motion(obs) @ (holder[:3, :3].T @ moving))
             if along <= s.tolerances.position:
                 return self._tighten(run, obs)
+            if push.carry and run.fresh(obs) and self._carry_lag(run, obs) > s.carry.follow_lag:
+                return self._stop(run, obs, f"the object did not follow the pusher down ({self._carry_lag(run, obs) * 1000:.1f} mm "
+                                            "behind it): the loosened grip holds more of its weight than reckoned")
             speed = float(np.clip(s.push.linear_gain * along, s.push.min_speed, s.push.speed))
-            # Keep the push line through the grasp axis: an offset across it would turn the object.
+            # Keep the push line through the grasp axis: an offset across it would turn the object (a carry's
+            # line is where it was planned, beside the axis as far as balances the weight).
             across = np.cross(push.direction, holder[:3, 0])
             touching = obs.pusher[:3, 3] + leading_tip(push.direction, obs.pusher[:3, :3], s.gripper.tip_radius,
                                                        s.fingertips.leading_tip)
-            offset = float((touching - holder[:3, 3]) @ across)
-            relative = np.concatenate([speed * push.direction - s.approach.gain * offset * across
+            offset = float((touching - holder[:3, 3]) @ across) - self.line_offset
+            relative = np.concatenate([speed * moving - s.approach.gain * offset * across
                                        + self._tilt_slide(run, obs) * holder[:3, 0], np.zeros(3)])
         else:
             turn = campaign.errors[1]
@@ -196,8 +222,25 @@ class Execute(State):
                                  min(s.limits.angular_speed, s.push.speed / lever)))
             relative = np.concatenate([np.zeros(3), np.sign(left) * rate * holder[:3, 0]])   # about the grasp axis
         command = coordinated(obs, relative, run.alpha)
-        command.holder_grip = loosened_grip(s, run.surface, obs)
+        command.holder_grip = self._pushing_grip(run, obs)
         return command
+
+    def _carry_lag(self, run: Run, obs: Observation) -> float:
+        """How much further [m] the pusher has gone down than the object since the carry began."""
+        pusher, object_at = self.carried_from
+        way = run.push.motion
+        went = float((apply(invert(obs.holder), obs.pusher[:3, 3]) - pusher) @ way)
+        return went - float((obs.object_in_holder[:3, 3] - object_at) @ way)
+
+    @staticmethod
+    def _pushing_grip(run: Run, obs: Observation) -> GripCommand:
+        """The holder's grip while the object is pushed: held for a level press, let down for a carry, else loosened."""
+        s = run.settings
+        if run.campaign.leveling:
+            return held_grip(s)
+        if run.push.carry:
+            return carrying_grip(s, run.surface, obs, run.push.motion)
+        return loosened_grip(s, run.surface, obs)
 
     def _press_level(self, run: Run, obs: Observation) -> Command:
         """Turn the object about `level_axis` through the grasp's middle, the grip held, under P control on
@@ -255,8 +298,9 @@ class Execute(State):
         (`tilt_steering`), from fresh poses certain of their tilt only."""
         s, pushed = run.settings, run.pushed
         if (s.steering.gain == 0.0 or pushed.reckoning.blind or obs.object_tilt_sigma > s.slip.tilt_sigma
-                or obs.time - obs.object_time > s.monitors.stale_after or run.push_spread):
-            return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers)
+                or obs.time - obs.object_time > s.monitors.stale_after or run.push_spread or run.push.carry):
+            return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers;
+            #                  a carry's tips hold the object up: sliding them would drag it off the grasp axis)
         tilt = turn_since(pushed.reference, obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher
         local = run.push.local_direction

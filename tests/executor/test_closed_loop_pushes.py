@@ -159,7 +159,7 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     from dmg_executor.contract import Outcome
 
     cell, loop, make = bracket_run
-    executor = make(shift=(0.0, 0.0, -0.012))
+    executor = make(shift=(0.0, 0.0, -0.012), **{"carry.enabled": False})
     pushing_open = []
 
     def record(observation):
@@ -173,6 +173,34 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     assert cell.gripper_status("arm2").opening < 0.002                     # ... and closed after
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
     assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
+
+
+def test_a_translation_out_towards_the_fingertips_is_carried_down_on_the_pushers_tips(loop_parts):
+    """The box 15 mm out of the grip along gripper 1's fingers, which point down, without straddle pushes:
+    the pusher's tips meet its lower face from below with the grip held, the grip loosens to hold only a
+    share of the weight, and the box comes down with the tips."""
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
+    from dmg_executor.grip import GRAVITY
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import load_object
+
+    cell, loop, _, _ = loop_parts
+    executor = translation_executor(loop_parts, ObjectSurface.of(load_object("box")), length=-0.015,
+                                    **{"straddle.opening": 0.0})
+    carrying_forces = []
+
+    def record(observation):
+        if _pushing(executor) and executor.run.push.carry:
+            carrying_forces.append(cell.gripper_status("arm1").max_force)
+
+    outcome = _run_recording(loop, executor, 150, record)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    s, surface = executor.settings, executor.run.surface
+    share = s.carry.weight_share * surface.mass * np.linalg.norm(GRAVITY) / (2 * s.grip.friction)
+    assert carrying_forces and max(carrying_forces) == pytest.approx(share, rel=0.05)
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+    assert cell.gripper_status("arm1").max_force == pytest.approx(s.grip.hold_force)
 
 
 def _pusher_in_the_bracket_corner(bracket_run):

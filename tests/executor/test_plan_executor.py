@@ -84,3 +84,47 @@ def test_a_pusher_that_never_moves_gives_its_pushes_up_and_the_run_ends_with_wha
     assert abs(executor.result.position_error - 0.010) < 1e-6
     assert any("given up" in note for note in executor.notes)
     assert any("no safe push" in note for note in executor.notes)
+
+
+def test_a_push_whose_way_loses_the_object_twice_is_not_planned_a_third_time():
+    """The camera sees the object only while the pusher is still (a made-up blind spot on every way to the
+    push): each time the object goes unseen on the way it is looked for and found; the second time that
+    push's direction is given up, and the run ends with the translation left."""
+    cell = box_cell()
+    executor = executor_for([translation([0.010, 0.0, 0.0])], cell, **{"monitors.stale_after_held": 0.5})
+    while not executor.done and cell.time < 300.0:
+        command = executor.update(cell.observe())
+        moving = bool(np.any(command.pusher)) and executor.step == Step.APPROACH
+        cell.move(command, seen=not moving, surface=executor.run.surface,
+                  tip_radius=executor.settings.gripper.tip_radius)
+    lost = [note for note in executor.notes if "on the way to a push" in note]
+    assert len(lost) == 2 and lost[1].endswith("the second time this way: no push this way again")
+    assert executor.result.outcome == Outcome.OUT_OF_TOLERANCE, executor.result
+
+
+def test_a_slip_seen_with_nothing_touching_the_object_is_looked_at_again_once_before_it_ends_the_run():
+    """On the way to the push a view shows the held box 8 mm off (a misleading lone-tag pose, sure of
+    itself): the run goes on to look at it again; the same seen again before any push is a slip."""
+    cell = box_cell()
+    executor = executor_for([translation([0.010, 0.0, 0.0])], cell)
+    for _ in range(5):      # the grip's reference: the mean of several poses (one alone could be the stray)
+        cell.move(executor.update(cell.observe()))
+    assert executor.step == Step.APPROACH
+    held = cell.object_in_holder.copy()
+    misleading = held.copy()
+    misleading[:3, 3] += [0.0, 0.0, 0.008]
+
+    def seen_off(ticks: int) -> None:
+        for _ in range(ticks):
+            cell.object_in_holder = misleading
+            command = executor.update(cell.observe())
+            cell.object_in_holder = held
+            if executor.done:
+                return
+            cell.move(command)
+
+    seen_off(executor.settings.slip.poses + 2)
+    assert not executor.done
+    assert any("with nothing touching it: looked at again from other views" in note for note in executor.notes)
+    seen_off(executor.settings.slip.poses + 2)
+    assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
