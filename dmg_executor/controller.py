@@ -256,13 +256,13 @@ class PlanExecutor:
         return fault
 
     def _doubt_slip(self, why: str) -> bool:
-        """A slip seen while nothing touches the object (no push under way) is looked at again from other
-        views, the grip closed at the hold force, before it ends the run, once until the next push: one
-        view can mislead for many images (sim, a U: a lone tag seen head-on gave poses 3-8 mm and 3-8 deg
+        """A slip seen while the grip is closed and nothing touches the object (outside a push) is looked at
+        again from other views, the grip closed at the hold force, before it ends the run, once until the
+        next push: one view can mislead for many images (sim, a U: a lone tag seen head-on gave poses 3-8 mm and 3-8 deg
         off, 0.5-0.8 mm sure of themselves, for 0.4 s of the pusher's approach)."""
         run = self.run
-        if self.state.pushing or run.search.slip_doubted:
-            return False
+        if self.state.step == Step.EXECUTE or run.search.slip_doubted:
+            return False     # (in a push the grip is loosened: the object may well have moved)
         run.search.slip_doubted = run.search.searching = run.search.seeking_certain = True
         run.note(f"{why}, with nothing touching it: looked at again from other views")
         self.slip_streak.clear()
