@@ -72,11 +72,15 @@ def loosened_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Obser
     """P control of the finger distance towards just inside the object's width, at the slide force,
     or at what keeps the object's weight from tilting it off the grasp axis if that is more."""
     s = settings
-    wanted = max(obs.opening - s.grip.slide_squeeze, 0.0)
-    opening = obs.opening + s.grip.finger_gain * (wanted - obs.opening)
     tilt_hold = s.grip.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
                                                      surface.mass, obs.opening, s.grip.friction)
-    return GripCommand(max(opening, 0.0), float(np.clip(tilt_hold, s.grip.slide_force, s.grip.hold_force)))
+    return GripCommand(_loosened_opening(s, obs), float(np.clip(tilt_hold, s.grip.slide_force, s.grip.hold_force)))
+
+
+def _loosened_opening(settings: ExecutorSettings, obs: Observation) -> float:
+    """One P step of the finger distance towards `grip.slide_squeeze` inside the object's width."""
+    wanted = max(obs.opening - settings.grip.slide_squeeze, 0.0)
+    return max(obs.opening + settings.grip.finger_gain * (wanted - obs.opening), 0.0)
 
 
 def carrying_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Observation, way: np.ndarray) -> GripCommand:
@@ -86,7 +90,7 @@ def carrying_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Obser
     s = settings
     weight = surface.mass * float(np.clip((obs.holder[:3, :3].T @ GRAVITY) @ way, 0.0, None))
     force = s.carry.weight_share * weight / (2.0 * s.grip.friction)
-    return GripCommand(loosened_grip(s, surface, obs).opening, float(min(force, s.grip.hold_force)))
+    return GripCommand(_loosened_opening(s, obs), float(min(force, s.grip.hold_force)))
 
 
 class Pilot:

@@ -46,9 +46,14 @@ class Push:
         return self.contact.carry
 
     @property
+    def sense(self) -> float:
+        """+1: the object moves along `direction`; -1 (a carry): against it."""
+        return -1.0 if self.carry else 1.0
+
+    @property
     def motion(self) -> np.ndarray:
         """The way the object is moved (holder frame): along the push, or opposite to it for a carry."""
-        return -self.local_direction if self.carry else self.local_direction
+        return self.sense * self.local_direction
 
 
 @dataclass

@@ -154,7 +154,7 @@ class Execute(State):
             met = met or abs(turned_since(pushed.reference, seen)) > s.push.turn_gain
         if closed < s.push.gap - short and not met:
             command = coordinated(obs, np.concatenate([s.push.speed * push.direction, np.zeros(3)]), run.alpha)
-            command.holder_grip = held_grip(s) if campaign.leveling or push.carry else loosened_grip(s, run.surface, obs)
+            command.holder_grip = held_grip(s) if push.carry else self._pushing_grip(run, obs)
             return command
         self.phase = Phase.PUSH
         if rotation and not campaign.leveling:
@@ -177,13 +177,14 @@ class Execute(State):
                 and obs.object_tilt_sigma <= s.slip.tilt_sigma):
             return self._stop(run, obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
         if campaign.primitive.kind == PrimitiveKind.TRANSLATION:
-            moving = -push.direction if push.carry else push.direction
+            moving = push.sense * push.direction
             along = float(campaign.remaining_motion(obs) @ (holder[:3, :3].T @ moving))
             if along <= s.tolerances.position:
                 return self._tighten(run, obs)
-            if push.carry and run.fresh(obs) and self._carry_lag(run, obs) > s.carry.follow_lag:
-                return self._stop(run, obs, f"the object did not follow the pusher down ({self._carry_lag(run, obs) * 1000:.1f} mm "
-                                            "behind it): the loosened grip holds more of its weight than reckoned")
+            lag = self._carry_lag(run, obs) if push.carry and run.fresh(obs) else 0.0
+            if lag > s.carry.follow_lag:
+                return self._stop(run, obs, f"the object did not follow the pusher down ({lag * 1000:.1f} mm behind it): "
+                                            "the loosened grip holds more of its weight than reckoned")
             speed = float(np.clip(s.push.linear_gain * along, s.push.min_speed, s.push.speed))
             # Keep the push line through the grasp axis: an offset across it would turn the object (a carry's
             # line is where it was planned, beside the axis as far as balances the weight).
