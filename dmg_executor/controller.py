@@ -85,6 +85,11 @@ class PlanExecutor:
         """What feedback publishes of the current state."""
         return self.state.step
 
+    @property
+    def state_name(self) -> str:
+        """The current state in full (with its phase), for logs."""
+        return self.state.name
+
     def progress(self) -> Progress:
         campaign = self.run.campaign
         primitives = campaign.primitives

@@ -52,6 +52,11 @@ from dmg_planner.primitives import Primitive, PrimitiveKind
 # transient local, handed to one that matches late - a bag recorder matched ~1 s after it subscribed
 # lost a run's first states (measured in the demo); a volatile reader (`dmg monitor`) gets no history.
 STATE_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# The robot's state and the object pose: the newest only, best effort, as rclpy takes /clock. A deeper
+# queue hands a node that fell behind its backlog oldest first, against a clock already current (50 poses
+# at 50 Hz read as a robot silent for 1.0 s); a reliable one holds every later sample back until a lost
+# one is resent (gripper state 1.2 s old). Measured with three cells on two cores.
+LATEST = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,6 +103,8 @@ class Run:
     done: Future            # set by the tick (or the watchdog) that ends the run
     last_feedback: float = -math.inf
     last_step: int = -1
+    last_state: str = ""      # logged as it changes
+    notes_logged: int = 0
 
 
 class ExecutorNode(Node):
@@ -122,9 +129,10 @@ class ExecutorNode(Node):
         self.state_pub = self.create_publisher(ExecutorState, "executor/state", STATE_QOS)
         for key, topic in (("holder", f"{holder}/endpoint_pose"), ("pusher", f"{pusher}/endpoint_pose"),
                            ("camera", values["camera_pose_topic"])):
-            self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose), 50)
-        self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"], self.on_object_pose, 10)
-        self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, 10)
+            self.create_subscription(PoseStamped, topic, lambda msg, key=key: self.on_pose(key, msg.header, msg.pose),
+                                     LATEST)
+        self.create_subscription(PoseWithCovarianceStamped, values["object_pose_topic"], self.on_object_pose, LATEST)
+        self.create_subscription(GripperState, f"{holder}/gripper/state", self.on_gripper, LATEST)
         self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data)
         self.planner = self.create_client(PlanRepositioning, values["planner_service"])
         self.action = ActionServer(self, ExecuteRepositioning, "execute_repositioning", execute_callback=self.execute,
@@ -286,10 +294,13 @@ class ExecutorNode(Node):
         return (observation is not None and observation.object_in_holder is not None
                 and observation.time - observation.object_time <= self.settings.monitors.stale_after)
 
-    def robot_age(self) -> float:
-        stamps = [self.poses[k][0] for k in ("holder", "pusher") if k in self.poses]
-        stamps.append(self.opening[0] if self.opening else -math.inf)
-        return self.now() - min(stamps) if len(stamps) == 3 else math.inf
+    def robot_age(self) -> tuple[float, str]:
+        """How old (node clock) the robot's oldest input is, and which it is."""
+        stamps = {f"{self.roles[key]}/endpoint_pose": self.poses[key][0] if key in self.poses else -math.inf
+                  for key in ("holder", "pusher")}
+        stamps[f"{self.roles['holder']}/gripper/state"] = self.opening[0] if self.opening else -math.inf
+        oldest = min(stamps, key=stamps.get)
+        return self.now() - stamps[oldest], oldest
 
     def camera_inputs(self) -> tuple[CameraInfo, dict] | None:
         """The latest camera_info and poses, once they hold what the camera model needs."""
@@ -315,7 +326,7 @@ class ExecutorNode(Node):
         run, silent = self.run, self.silence()
         if run is None:
             self.publish_idle_state()
-        elif silent > self.settings.monitors.robot_timeout and not run.executor.done:
+        elif silent > self.values["silence_timeout"] and not run.executor.done:
             # Silent robot and no control tick either (with sim time a dead simulator stops them
             # both); while ticks run, the tick's own check of the poses' age (node clock) applies.
             self.finish(run, run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses from the robot for "
@@ -328,9 +339,9 @@ class ExecutorNode(Node):
         executor = run.executor
         if run.goal_handle.is_cancel_requested:
             command = executor.cancel()
-        elif self.robot_age() > self.settings.monitors.robot_timeout:
+        elif (age := self.robot_age())[0] > self.settings.monitors.robot_timeout:
             command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
-                                     f"{self.robot_age():.2f} s: stopped")
+                                     f"{age[0]:.2f} s (the oldest: {age[1]}): stopped")
         else:
             command = executor.update(self.observation())
         self.finish(run, command)
@@ -341,6 +352,7 @@ class ExecutorNode(Node):
         executor = run.executor
         self.publish_command(command)
         self.publish_progress(run)
+        self.log_progress(run)
         if executor.done:
             self.publish_command(Command(holder_grip=command.holder_grip))
             run.done.set_result(executor.result)
@@ -358,6 +370,17 @@ class ExecutorNode(Node):
                 msg = GripperCommand(opening=float(grip.opening), max_force=float(grip.max_force))
                 msg.header.stamp = stamp
                 self.grip_pubs[key].publish(msg)
+
+    def log_progress(self, run: Run) -> None:
+        """Each change of state and each note, as it happens: the log says what the run did."""
+        executor, logger = run.executor, self.get_logger()
+        if executor.state_name != run.last_state and not executor.done:
+            run.last_state = executor.state_name
+            progress = executor.progress()
+            logger.info(f"primitive {progress.primitive_index + 1}/{progress.primitive_count}: {run.last_state}")
+        for note in executor.notes[run.notes_logged:]:
+            logger.info(f"note: {note}")
+        run.notes_logged = len(executor.notes)
 
     def publish_progress(self, run: Run) -> None:
         progress = run.executor.progress()

@@ -9,7 +9,9 @@ pose, when given -, tags it cannot explain are rejected as outliers
 (a misdetection, a tag of another object), and the pose is refined by Levenberg-Marquardt
 over all corners of the inlier tags. Quality = RMS reprojection error over those corners;
 covariance = sigma^2 (J^T J)^-1 of the reprojection, with sigma the residual's standard
-deviation (at least `pixel_noise`), expressed in the requested frame.
+deviation (at least `pixel_noise`), plus the spread to any pose that explains the corners
+about as well (a lone tag's mirror) by how likely it is given the last pose, expressed in
+the requested frame.
 """
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.special import expit
 
 from dmg_common.transforms import distance, from_rotation, invert
 from dmg_perception.tags import detector, tag_corners, tag_pose
@@ -61,9 +65,11 @@ def _matrix(rvec, tvec) -> np.ndarray:
 
 
 class ObjectPoseEstimator:
-    def __init__(self, objects: list[ObjectModel], inlier_threshold: float = 3.0, pixel_noise: float = 0.3):
+    def __init__(self, objects: list[ObjectModel], inlier_threshold: float = 3.0, pixel_noise: float = 0.3,
+                 prior_turn: float = np.deg2rad(3.0)):
         self.inlier_threshold = inlier_threshold
         self.pixel_noise = pixel_noise
+        self.prior_turn = prior_turn     # rad: the least rotation uncertainty of a last pose that settles a mirror
         self.detector = detector()
         self.tags: dict[int, tuple[str, object]] = {}
         for model in objects:
@@ -114,10 +120,12 @@ class ObjectPoseEstimator:
         return max(sorted(counts), key=lambda name: counts[name]) if counts else None
 
     def estimate(self, observations: list[TagObservation], frame_from_camera: np.ndarray | None = None,
-                 object_name: str | None = None, prior: np.ndarray | None = None) -> ObjectEstimate | None:
+                 object_name: str | None = None, prior: np.ndarray | None = None,
+                 prior_covariance: np.ndarray | None = None) -> ObjectEstimate | None:
         """The object's pose (in the frame `frame_from_camera` maps the camera into; default the
         camera) from the observations; None when none of its tags is explained. `prior`: its last
-        pose in that frame, which settles between proposals that explain the tags alike."""
+        pose in that frame (with its covariance, when known), which settles between proposals that
+        explain the tags alike - as far as it can tell them apart."""
         object_name = object_name or self.identify(observations)
         mine = [o for o in observations if o.id in self.tags and self.tags[o.id][0] == object_name]
         if not mine:
@@ -136,26 +144,31 @@ class ObjectPoseEstimator:
         explaining = [proposal for proposal in proposals if proposal[0] == most]
         best = min(explaining, key=lambda proposal: proposal[1])
         alike = [proposal for proposal in explaining if proposal[1] <= best[1] + AMBIGUOUS_PX * max(most, 1)]
+        to_frame = np.eye(4) if frame_from_camera is None else frame_from_camera
         if prior is not None and len(alike) > 1:
-            to_frame = np.eye(4) if frame_from_camera is None else frame_from_camera
             best = min(alike, key=lambda proposal: distance(to_frame @ proposal[2], prior)[1])
-        best = best[2]
-        errors = self._errors(best, mine, layout)
+        chosen = best[2]
+        errors = self._errors(chosen, mine, layout)
         inliers = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
         if not inliers:
             return None
         points = np.concatenate([layout[o.id] for o in inliers])
         pixels = np.concatenate([o.corners for o in inliers])
-        camera_from_object = self._refine(best, points, pixels)
+        camera_from_object = self._refine(chosen, points, pixels)
         errors = self._errors(camera_from_object, mine, layout)
         for observation, error in zip(mine, errors):
             observation.reprojection_error = float(error)
         used = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
         residual = self._residuals(camera_from_object, points, pixels)
         rms = float(np.sqrt(np.mean(residual**2)))
-        frame_from_camera = np.eye(4) if frame_from_camera is None else frame_from_camera
-        pose = frame_from_camera @ camera_from_object
-        covariance = self._covariance(camera_from_object, frame_from_camera, points, residual)
+        rivals = []        # the other alike proposals, refined, that still explain the corners about as well
+        for proposal in alike:
+            rival = self._refine(proposal[2], points, pixels) if proposal is not best else None
+            if rival is not None and np.sqrt(np.mean(self._residuals(rival, points, pixels) ** 2)) <= rms + AMBIGUOUS_PX:
+                weight = self._rival_weight(to_frame @ camera_from_object, to_frame @ rival, prior, prior_covariance)
+                rivals.append((rival, weight))
+        pose = to_frame @ camera_from_object
+        covariance = self._covariance(camera_from_object, to_frame, points, residual, rivals)
         return ObjectEstimate(object_name, pose, covariance, rms, sorted(o.id for o in used),
                               sorted(o.id for o in mine if o not in used))
 
@@ -185,9 +198,25 @@ class ObjectPoseEstimator:
             errors.append(float(np.sqrt(np.mean(residual**2))))
         return np.asarray(errors)
 
+    def _rival_weight(self, chosen: np.ndarray, rival: np.ndarray, prior: np.ndarray | None,
+                      prior_covariance: np.ndarray | None) -> float:
+        """How likely the rival is the object's pose rather than the chosen one, given the last pose
+        (both explain the corners alike): 1/2 without one; with one, by their turns from it under its
+        rotation uncertainty (at least `prior_turn`) - a mirror tens of degrees away weighs nothing."""
+        if prior is None:
+            return 0.5
+        sigma = self.prior_turn
+        if prior_covariance is not None and np.all(np.isfinite(prior_covariance)):
+            sigma = max(sigma, float(np.sqrt(np.linalg.eigvalsh(prior_covariance[3:, 3:]).max())))
+        chosen_turn, rival_turn = distance(chosen, prior)[1], distance(rival, prior)[1]
+        return float(expit(-(rival_turn**2 - chosen_turn**2) / (2 * sigma**2)))
+
     def _covariance(self, camera_from_object: np.ndarray, frame_from_camera: np.ndarray, points: np.ndarray,
-                    residual: np.ndarray) -> np.ndarray:
-        """sigma^2 (J^T J)^-1 over (position, rotation about fixed axes) of the object, in the frame.
+                    residual: np.ndarray, rivals: list[tuple[np.ndarray, float]]) -> np.ndarray:
+        """sigma^2 (J^T J)^-1 over (position, rotation about fixed axes) of the object, in the frame,
+        plus the spread to each rival - a pose that explains the corners about as well (a lone tag's
+        mirror, refined) - by how likely it is: the curvature at one minimum says nothing of another
+        about as deep (a lone tag seen nearly head-on gave poses 3-8 deg off at 0.3 deg sigma).
 
         OpenCV's projection Jacobian at a zero Rodrigues vector (points pre-turned) is exactly
         the one for a small rotation exp(dtheta) applied to the object in the camera frame."""
@@ -197,5 +226,9 @@ class ObjectPoseEstimator:
         dof = max(residual.size - 6, 1)
         sigma2 = max(float(residual @ residual) / dof, self.pixel_noise**2)
         in_camera = sigma2 * np.linalg.pinv(jacobian.T @ jacobian)
+        for rival, weight in rivals:
+            apart = np.concatenate([rival[:3, 3] - camera_from_object[:3, 3],
+                                    Rotation.from_matrix(rival[:3, :3] @ camera_from_object[:3, :3].T).as_rotvec()])
+            in_camera = in_camera + weight * np.outer(apart, apart)
         rotate = np.kron(np.eye(2), frame_from_camera[:3, :3])
         return rotate @ in_camera @ rotate.T

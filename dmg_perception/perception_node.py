@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from dmg_interfaces.msg import PerceptionStatus, TagDetection, TagDetections
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from dmg_common.ros.geometry_messages import pose_message, seconds, transform_from_pose
@@ -36,6 +36,9 @@ from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState
 from dmg_planner.objects import ObjectError, load_object, object_names
 
+# Camera and gripper poses, buffered by stamp: best effort, as a reliable reader holds every later pose
+# back until a lost one is resent, and an image then finds no pose of its time.
+POSES_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
 INPUT_WAIT = 0.1   # s (wall) an image waits for the camera and gripper poses of its time stamp (and camera_info)
 
 
@@ -58,7 +61,8 @@ class PerceptionNode(Node):
                 if name in named:     # asked for by name: the node cannot do its job without it
                     raise
                 self.get_logger().error(f"{error}; perception goes on without it")
-        estimator = ObjectPoseEstimator(models, values["inlier_threshold"], values["pixel_noise"])
+        estimator = ObjectPoseEstimator(models, values["inlier_threshold"], values["pixel_noise"],
+                                        np.deg2rad(values["prior_turn"]))
         self.tracker = Tracker(estimator, values["lost_timeout"], values["pose_tolerance"], values["object"])
         self.lock = threading.Lock()            # guards the tracker's buffers and the pending image
         self.pending: Image | None = None
@@ -77,9 +81,9 @@ class PerceptionNode(Node):
         self.create_subscription(Image, values["image_topic"], self.on_image, qos_profile_sensor_data)
         self.create_subscription(CameraInfo, values["camera_info_topic"], self.on_camera_info, qos_profile_sensor_data)
         self.create_subscription(PoseStamped, values["camera_pose_topic"],
-                                 lambda msg: self.on_pose(self.tracker.camera_poses, msg, "camera pose"), 50)
+                                 lambda msg: self.on_pose(self.tracker.camera_poses, msg, "camera pose"), POSES_QOS)
         self.create_subscription(PoseStamped, values["gripper_pose_topic"],
-                                 lambda msg: self.on_pose(self.tracker.gripper_poses, msg, "gripper pose"), 50)
+                                 lambda msg: self.on_pose(self.tracker.gripper_poses, msg, "gripper pose"), POSES_QOS)
         self.create_timer(1.0 / values["status_rate"], self.publish_idle_status)
         self.create_timer(1.0, self.publish_diagnostics)
         self.worker = threading.Thread(target=self.work, name="perception", daemon=True)

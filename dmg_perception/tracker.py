@@ -75,8 +75,9 @@ class Tracker:
             else:
                 frame_from_camera = invert(gripper) @ camera
                 result.camera_from_frame = invert(frame_from_camera)
+                last = self.prior(stamp)
                 result.estimate = self.estimator.estimate(result.observations, frame_from_camera, self.object_name,
-                                                          self.prior(stamp))
+                                                          last.pose if last else None, last.covariance if last else None)
                 if result.estimate is None:
                     known = [o.id for o in result.observations if o.id in self.estimator.tags]
                     result.problem = ("no tag of the object in view" if not known else
@@ -86,14 +87,14 @@ class Tracker:
         self.last_problem = result.problem
         return result
 
-    def prior(self, stamp: float) -> np.ndarray | None:
-        """The last seen pose, to settle a lone tag's mirror in an image taken at `stamp` - only
+    def prior(self, stamp: float) -> ObjectEstimate | None:
+        """The last seen estimate, to settle a lone tag's mirror in an image taken at `stamp` - only
         while it is recent (within lost_timeout): once the object was lost (a reset, a regrasp)
         it may be anywhere."""
         seen = self.last_seen
         if seen is None or stamp - seen.stamp > self.lost_timeout:
             return None
-        return seen.estimate.pose
+        return seen.estimate
 
     def status(self, now: float) -> TrackingStatus:
         """Where tracking stands at receiver time `now`."""

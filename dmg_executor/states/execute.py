@@ -64,6 +64,10 @@ class Execute(State):
     def pushing(self) -> bool:
         return self.phase in (Phase.TOUCH, Phase.PUSH)
 
+    @property
+    def name(self) -> str:
+        return f"Execute.{self.phase.name}"
+
     def unseen_push(self, run: Run, obs: Observation) -> Command | None:
         if self.phase == Phase.TIGHTEN:
             return None

@@ -83,6 +83,10 @@ class Operator(RosTestNode):
         future = handle.get_result_async()
         return self.wait_for(lambda: future.result() if future.done() else None, timeout, "the result").result
 
+    def why(self, result) -> str:
+        """A failed run's message and what the executor logged on the way (its states and notes)."""
+        return f"{result.message}\n--- executor_node log (end) ---\n{self.executor_log()}"
+
     def wait_for_step(self, step: int, timeout: float = 120.0) -> None:
         self.wait_for(lambda: any(f.step == step for f in self.feedback), timeout, f"feedback step {step}")
 
@@ -93,11 +97,12 @@ def cell(tmp_path_factory):
     sim_time = ["--ros-args", "-p", "use_sim_time:=true"]
     sim = processes.start_logged("sim_bridge", [DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args",
                                   "-p", "clock_rate:=100.0", "-p", "state_rate:=50.0"])
-    for package, executable in (("dmg_perception", "perception_node"), ("dmg_planner", "planner_node"),
-                                ("dmg_executor", "executor_node")):
+    for package, executable in (("dmg_perception", "perception_node"), ("dmg_planner", "planner_node")):
         processes.start_logged(executable, [DMG, "run", package, executable, *sim_time])
+    executor = processes.start_logged("executor_node", [DMG, "run", "dmg_executor", "executor_node", *sim_time])
     operator = Operator()
     operator.sim = sim
+    operator.executor_log = lambda: processes.output(executor, tail=4000)
     try:
         operator.wait_for(lambda: operator.latest.get("/perception/object_pose"), 90, "a first object pose")
         operator.wait_for(lambda: operator.latest.get("/executor/state"), 60, "the executor's state")
@@ -119,7 +124,7 @@ def test_single_translation_primitive_reaches_its_target_within_3_mm(cell, alpha
     plan = cell.plan(start, translated(start))
     assert [p.kind for p in plan.primitives] == [1], "the planner should give one translation"
     result = cell.result(cell.send(plan=plan, alpha=alpha))
-    assert result.success, result.message
+    assert result.success, cell.why(result)
     target = transform(plan.primitives[-1].gripper_after)
     moved, turned = distance(cell.truth(), target)
     assert moved < 0.003, f"{moved * 1000:.1f} mm from the target (alpha {alpha})"
@@ -135,7 +140,7 @@ def test_single_rotation_primitive_reaches_its_target_within_3_degrees(cell):
     plan = cell.plan(start, goal)
     assert [p.kind for p in plan.primitives] == [0], "the planner should give one rotation"
     result = cell.result(cell.send(plan=plan, alpha=1.0))
-    assert result.success, result.message
+    assert result.success, cell.why(result)
     _, turned = distance(cell.truth(), transform(plan.primitives[-1].gripper_after))
     assert np.rad2deg(turned) < 3.0
     assert np.rad2deg(distance(cell.truth(), start)[1]) > 15.0              # it really turned
@@ -149,7 +154,7 @@ def test_two_primitive_goal_is_planned_from_the_seen_grasp_and_completes(cell):
     from dmg_common.ros.geometry_messages import pose_message
 
     result = cell.result(cell.send(object_id="box", goal=pose_message(goal), alpha=1.0))
-    assert result.success, result.message
+    assert result.success, cell.why(result)
     assert result.primitives_completed >= 2
     moved, turned = distance(cell.truth(), goal)
     assert moved < 0.003 and np.rad2deg(turned) < 3.0, (moved, np.rad2deg(turned))

@@ -172,6 +172,43 @@ def test_a_lone_tag_seen_nearly_head_on_takes_the_mirror_pose_nearest_the_last_o
     assert with_prior.max() < 25.0 and np.percentile(with_prior, 90) < np.percentile(alone, 90) / 2
 
 
+def test_a_lone_tags_pose_is_as_uncertain_as_its_mirror_is_likely():
+    """The same lone tag 5-25 deg off head-on: without a last pose the chosen pose is the mirror a
+    quarter of the time, and its covariance spans the mirror (the curvature of the chosen fit alone
+    claimed a few degrees); a last pose certain to 0.5 deg and 1 deg from the truth rules the mirror
+    out, and the covariance is the fit's own."""
+    from dmg_perception.estimator import TagObservation
+    from dmg_perception.tags import tag_corners
+
+    model = load_object("plug")
+    estimator = ObjectPoseEstimator([model])
+    intrinsics = np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]])
+    estimator.set_camera(intrinsics)
+    tag = model.apriltags[0]
+    rng = np.random.default_rng(11)
+    blind, settled = [], []        # (turn error, largest rotation sigma) [deg]
+    for _ in range(100):
+        truth = from_rotation(Rotation.from_euler("xyz", [180 + rng.uniform(5, 25), rng.uniform(-10, 10),
+                                                          rng.uniform(0, 360)], degrees=True).as_matrix(),
+                              [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), 0.35])
+        pixels = (tag_corners(tag) @ truth[:3, :3].T + truth[:3, 3]) @ intrinsics.T
+        corners = pixels[:, :2] / pixels[:, 2:] + rng.normal(0.0, 0.5, (4, 2))
+        axis = rng.normal(size=3)
+        prior = from_rotation(Rotation.from_rotvec(np.deg2rad(1.0) * axis / np.linalg.norm(axis)).as_matrix(),
+                              [0, 0, 0]) @ truth
+        for found, out in ((estimator.estimate([TagObservation(tag.id, corners)]), blind),
+                           (estimator.estimate([TagObservation(tag.id, corners)], prior=prior,
+                                               prior_covariance=np.diag([1e-8] * 3 + [np.deg2rad(0.5) ** 2] * 3)),
+                            settled)):
+            sigma = np.sqrt(np.linalg.eigvalsh(found.covariance[3:, 3:]).max())
+            out.append(np.rad2deg([distance(found.pose, truth)[1], sigma]))
+    blind, settled = np.array(blind), np.array(settled)
+    assert np.mean(blind[:, 0] > 25.0) > 0.1                        # the mirror is often taken ...
+    assert np.mean(blind[:, 0] > 3 * blind[:, 1]) < 0.1             # ... but never with confidence
+    assert np.percentile(settled[:, 0], 90) < 25.0                  # the last pose settles it ...
+    assert np.median(settled[:, 1]) < np.median(blind[:, 1]) / 3    # ... and then the fit is as sure as it is
+
+
 def test_duplicate_tag_ids_across_objects_are_refused():
     box = load_object("box")
     clone = load_object("box")
