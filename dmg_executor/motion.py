@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from dmg_common.transforms import turn_between
 from dmg_executor.contract import Command, GripCommand, Observation
 from dmg_executor.ects import arm_twists
-from dmg_executor.grip import GRAVITY, tilt_hold_force
+from dmg_executor.grip import GRAVITY, tilt_hold_force, turn_hold_force
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 
@@ -70,11 +70,15 @@ def held_grip(settings: ExecutorSettings) -> GripCommand:
 
 def loosened_grip(settings: ExecutorSettings, surface: ObjectSurface, obs: Observation) -> GripCommand:
     """P control of the finger distance towards just inside the object's width, at the slide force,
-    or at what keeps the object's weight from tilting it off the grasp axis if that is more."""
-    s = settings
-    tilt_hold = s.grip.tilt_hold_margin * tilt_hold_force(obs.object_in_holder, obs.holder[:3, :3], surface.centre_of_mass,
-                                                     surface.mass, obs.opening, s.grip.friction)
-    return GripCommand(_loosened_opening(s, obs), float(np.clip(tilt_hold, s.grip.slide_force, s.grip.hold_force)))
+    or at what keeps the object's weight from tilting it off the grasp axis or swinging it round the
+    axis if that is more."""
+    s, pose, rotation = settings, obs.object_in_holder, obs.holder[:3, :3]
+    tilt_hold = s.grip.tilt_hold_margin * tilt_hold_force(pose, rotation, surface.centre_of_mass, surface.mass,
+                                                          obs.opening, s.grip.friction)
+    turn_hold = s.grip.turn_hold_margin * turn_hold_force(pose, rotation, surface.centre_of_mass, surface.mass,
+                                                          s.grip.torsional_friction)
+    return GripCommand(_loosened_opening(s, obs),
+                       float(np.clip(max(tilt_hold, turn_hold), s.grip.slide_force, s.grip.hold_force)))
 
 
 def _loosened_opening(settings: ExecutorSettings, obs: Observation) -> float:

@@ -214,6 +214,8 @@ class GripSettings:
     slide_force: float
     friction: float
     tilt_hold_margin: float
+    torsional_friction: float
+    turn_hold_margin: float
     slide_squeeze: float
     settle: float
     finger_gain: float

@@ -95,3 +95,44 @@ def test_the_loosened_grip_the_executor_picks_keeps_the_bracket_from_tilting_whe
     finally:
         cell.close()
     assert tilts[1.0] > 3.0 and tilts[settings.grip.tilt_hold_margin] < 0.5, tilts
+
+
+def test_the_loosened_grip_the_executor_picks_keeps_a_heavy_block_held_off_centre_from_swinging_round(
+        tmp_path, monkeypatch):
+    """A 200 g block held 17 mm to the side of its centre of mass: loosened to half the force whose pads'
+    torsional friction balances its weight's turn about the grasp axis it swings round; at the executor's
+    margin over that it stays put."""
+    import math
+
+    from dmg_bringup.object_generator import GeneratorSettings, generate
+    from dmg_common.transforms import from_rotation
+    from dmg_executor.grip import turn_hold_force
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_sim_bridge.cell import Cell, default_grasp
+
+    block = GeneratorSettings.load().families["block"]
+    generate(1, 5, tmp_path, GeneratorSettings.load({"families": {"block": block}, "mass_range": [0.2, 0.2]}),
+             sim_check=False)
+    monkeypatch.setenv("DMG_OBJECTS_DIR", str(tmp_path))
+    model = load_object("gen_5_0")
+    settings = ExecutorSettings.defaults()
+    surface = ObjectSurface.of(model)
+    cell = Cell()
+    try:
+        aside = from_rotation(np.eye(3), [0.0, 0.017, 0.0]) @ default_grasp(model, cell.config.gripper.max_opening)
+        turns = {}
+        for margin in (0.5, settings.grip.turn_hold_margin):
+            cell.reset("gen_5_0", object_in_gripper=aside)
+            cell.run(0.5)
+            start = cell.object_in_gripper("arm1")
+            balance = turn_hold_force(start, cell.grasp_pose("arm1")[:3, :3], surface.centre_of_mass, surface.mass,
+                                      settings.grip.torsional_friction)
+            assert settings.grip.slide_force / 2 < balance < settings.grip.hold_force   # something to hold
+            cell.command_gripper("arm1", max(cell.opening("arm1") - settings.grip.slide_squeeze, 0.0), margin * balance)
+            cell.run(2.0)
+            turned = cell.object_in_gripper("arm1")[:3, :3] @ start[:3, :3].T      # in the holder frame
+            turns[margin] = math.degrees(abs(Rotation.from_matrix(turned).as_rotvec()[0]))   # about the grasp axis
+    finally:
+        cell.close()
+    assert turns[0.5] > 3.0 and turns[settings.grip.turn_hold_margin] < 0.5, turns
