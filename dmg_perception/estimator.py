@@ -10,8 +10,8 @@ pose, when given -, tags it cannot explain are rejected as outliers
 over all corners of the inlier tags. Quality = RMS reprojection error over those corners;
 covariance = sigma^2 (J^T J)^-1 of the reprojection, with sigma the residual's standard
 deviation (at least `pixel_noise`), plus the spread to any pose that explains the corners
-about as well (a lone tag's mirror) by how likely it is given the last pose, expressed in
-the requested frame.
+about as well (a lone tag's mirror) by how likely it is, given the corners and the last
+pose, expressed in the requested frame.
 """
 from __future__ import annotations
 
@@ -161,12 +161,14 @@ class ObjectPoseEstimator:
         used = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
         residual = self._residuals(camera_from_object, points, pixels)
         rms = float(np.sqrt(np.mean(residual**2)))
-        rivals = []        # the other alike proposals, refined, that still explain the corners about as well
+        noise2 = self._noise2(residual)
+        rivals = []        # the other alike proposals, refined, with how likely each is instead
         for proposal in alike:
-            rival = self._refine(proposal[2], points, pixels) if proposal is not best else None
-            if rival is not None and np.sqrt(np.mean(self._residuals(rival, points, pixels) ** 2)) <= rms + AMBIGUOUS_PX:
-                weight = self._rival_weight(to_frame @ camera_from_object, to_frame @ rival, prior, prior_covariance)
-                rivals.append((rival, weight))
+            if proposal is not best:
+                rival = self._refine(proposal[2], points, pixels)
+                misfit = float(np.sum(self._residuals(rival, points, pixels) ** 2) - residual @ residual)
+                rivals.append((rival, self._rival_weight(to_frame @ camera_from_object, to_frame @ rival, misfit,
+                                                         noise2, prior, prior_covariance)))
         pose = to_frame @ camera_from_object
         covariance = self._covariance(camera_from_object, to_frame, points, residual, rivals)
         return ObjectEstimate(object_name, pose, covariance, rms, sorted(o.id for o in used),
@@ -198,18 +200,25 @@ class ObjectPoseEstimator:
             errors.append(float(np.sqrt(np.mean(residual**2))))
         return np.asarray(errors)
 
-    def _rival_weight(self, chosen: np.ndarray, rival: np.ndarray, prior: np.ndarray | None,
-                      prior_covariance: np.ndarray | None) -> float:
-        """How likely the rival is the object's pose rather than the chosen one, given the last pose
-        (both explain the corners alike): 1/2 without one; with one, by their turns from it under its
-        rotation uncertainty (at least `prior_turn`) - a mirror tens of degrees away weighs nothing."""
-        if prior is None:
-            return 0.5
-        sigma = self.prior_turn
-        if prior_covariance is not None and np.all(np.isfinite(prior_covariance)):
-            sigma = max(sigma, float(np.sqrt(np.linalg.eigvalsh(prior_covariance[3:, 3:]).max())))
-        chosen_turn, rival_turn = distance(chosen, prior)[1], distance(rival, prior)[1]
-        return float(expit(-(rival_turn**2 - chosen_turn**2) / (2 * sigma**2)))
+    def _noise2(self, residual: np.ndarray) -> float:
+        """The corners' noise variance [px^2]: the residual's, at least `pixel_noise` squared."""
+        return max(float(residual @ residual) / max(residual.size - 6, 1), self.pixel_noise**2)
+
+    def _rival_weight(self, chosen: np.ndarray, rival: np.ndarray, misfit: float, noise2: float,
+                      prior: np.ndarray | None, prior_covariance: np.ndarray | None) -> float:
+        """How likely the rival is the object's pose rather than the chosen one: by how much worse it
+        explains the corners (`misfit`, its extra sum of squared residuals, under the corners' noise)
+        and, given the last pose, by their turns from it under its rotation uncertainty (at least
+        `prior_turn`) - a mirror tens of degrees from the last pose, or one the corners tell apart
+        by more than their noise, weighs nothing."""
+        odds = -misfit / (2 * noise2)
+        if prior is not None:
+            sigma = self.prior_turn
+            if prior_covariance is not None and np.all(np.isfinite(prior_covariance)):
+                sigma = max(sigma, float(np.sqrt(np.linalg.eigvalsh(prior_covariance[3:, 3:]).max())))
+            chosen_turn, rival_turn = distance(chosen, prior)[1], distance(rival, prior)[1]
+            odds -= (rival_turn**2 - chosen_turn**2) / (2 * sigma**2)
+        return float(expit(odds))
 
     def _covariance(self, camera_from_object: np.ndarray, frame_from_camera: np.ndarray, points: np.ndarray,
                     residual: np.ndarray, rivals: list[tuple[np.ndarray, float]]) -> np.ndarray:
@@ -223,9 +232,7 @@ class ObjectPoseEstimator:
         turned = points @ camera_from_object[:3, :3].T
         _, jacobian = cv2.projectPoints(turned, np.zeros(3), camera_from_object[:3, 3], self.intrinsics, self.distortion)
         jacobian = np.hstack([jacobian[:, 3:6], jacobian[:, 0:3]])
-        dof = max(residual.size - 6, 1)
-        sigma2 = max(float(residual @ residual) / dof, self.pixel_noise**2)
-        in_camera = sigma2 * np.linalg.pinv(jacobian.T @ jacobian)
+        in_camera = self._noise2(residual) * np.linalg.pinv(jacobian.T @ jacobian)
         for rival, weight in rivals:
             apart = np.concatenate([rival[:3, 3] - camera_from_object[:3, 3],
                                     Rotation.from_matrix(rival[:3, :3] @ camera_from_object[:3, :3].T).as_rotvec()])

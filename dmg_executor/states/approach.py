@@ -30,7 +30,7 @@ class Approach(State):
         command = pilot.along(obs)
         arrived = pilot.arrived(obs)
         if not arrived and pilot.stalled(obs):
-            if not pilot.there_but_turned(obs):
+            if not pilot.there_but_turned(obs, seen=obs.time - obs.object_time <= s.monitors.stale_after):
                 return self._give_up(run, obs)
             arrived = True
         if arrived:

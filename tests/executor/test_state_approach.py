@@ -3,6 +3,7 @@ the start into EXECUTE with the grip loosening; a route the arm cannot follow is
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from dmg_executor.contract import Command
 from dmg_executor.states.approach import Approach, Homeward
@@ -49,3 +50,35 @@ def test_a_pusher_that_makes_no_headway_gives_the_push_up_and_heads_home():
     outcome = drive(outcome.to, run, cell)
     assert isinstance(outcome.to, FindContact)
     assert np.linalg.norm(cell.pusher[:3, 3] - run.pusher_home[:3, 3]) < 0.01
+
+
+def test_a_pusher_on_the_push_line_whose_wrist_cannot_turn_the_last_degrees_pushes_when_it_sees_the_object():
+    cell, run = planned_translation()
+    wanted = run.push.route.orientations[-1]
+    short = Rotation.from_rotvec(np.deg2rad(4.0) * np.array([0.0, 0.0, 1.0])).as_matrix()   # 4 deg short
+    run.pilot.route.index = len(run.pilot.route.waypoints) - 1
+    cell.pusher[:3, 3], cell.pusher[:3, :3] = run.push.start, short @ wanted
+    state, began = Approach(), cell.time
+    outcome = state.tick(run, cell.observe())
+    while isinstance(outcome, Command):          # the wrist stays 4 deg short of the turn, the object in view
+        cell.pusher[:3, :3] = short @ wanted
+        cell.time += 0.1
+        cell.seen_at = cell.time
+        outcome = state.tick(run, cell.observe())
+    assert isinstance(outcome.to, Execute) and not run.memory.unreachable and not run.push.blind
+    assert cell.time - began >= run.settings.approach.stall_time       # (after trying to turn)
+
+
+def test_a_pusher_short_of_the_push_start_is_not_there_however_well_it_sees():
+    cell, run = planned_translation()
+    run.pilot.route.index = len(run.pilot.route.waypoints) - 1
+    cell.pusher[:3, 3] = run.push.start - 3 * run.settings.tolerances.position * run.push.direction
+    cell.pusher[:3, :3] = run.push.route.orientations[-1]
+    state = Approach()
+    outcome = state.tick(run, cell.observe())
+    while isinstance(outcome, Command):          # the arm stuck 3 mm short, the object in view
+        cell.pusher[:3, 3] = run.push.start - 3 * run.settings.tolerances.position * run.push.direction
+        cell.time += 0.1
+        cell.seen_at = cell.time
+        outcome = state.tick(run, cell.observe())
+    assert not isinstance(outcome.to, Execute)
