@@ -140,11 +140,9 @@ def test_a_tag_that_disagrees_with_the_layout_is_rejected(cell, estimator):
     assert moved < 0.0015 and np.rad2deg(turned) < 1.0
 
 
-def test_a_lone_tag_seen_nearly_head_on_takes_the_mirror_pose_nearest_the_last_one():
-    """A single small tag 35 cm away, 5-25 deg off head-on, corners with 0.5 px noise: its two
-    IPPE poses (tilted either way) explain the corners alike and the better fitting one is often
-    the mirror (tens of degrees off). Given the last pose (here the truth turned 5 deg), the
-    estimator takes the one nearest it."""
+def lone_tag_views(seed: int, prior_turn_deg: float, count: int = 100):
+    """A single small tag of the plug 35 cm away, 5-25 deg off head-on, its corners with 0.5 px noise:
+    (the estimator, one observation of it, the truth, a last pose turned `prior_turn_deg` off it)."""
     from dmg_perception.estimator import TagObservation
     from dmg_perception.tags import tag_corners
 
@@ -153,53 +151,42 @@ def test_a_lone_tag_seen_nearly_head_on_takes_the_mirror_pose_nearest_the_last_o
     intrinsics = np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]])
     estimator.set_camera(intrinsics)
     tag = model.apriltags[0]
-    rng = np.random.default_rng(7)
-    alone, with_prior = [], []
-    for _ in range(100):
-        truth = from_rotation(Rotation.from_euler("xyz", [180 + rng.uniform(5, 25), rng.uniform(-10, 10),
-                                                          rng.uniform(0, 360)], degrees=True).as_matrix(),
-                              [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), 0.35])
-        points = tag_corners(tag) @ truth[:3, :3].T + truth[:3, 3]
-        pixels = points @ intrinsics.T
-        corners = pixels[:, :2] / pixels[:, 2:] + rng.normal(0.0, 0.5, (4, 2))
-        axis = rng.normal(size=3)
-        prior = from_rotation(Rotation.from_rotvec(np.deg2rad(5.0) * axis / np.linalg.norm(axis)).as_matrix(),
-                              [0, 0, 0]) @ truth
-        alone.append(distance(estimator.estimate([TagObservation(tag.id, corners)]).pose, truth)[1])
-        with_prior.append(distance(estimator.estimate([TagObservation(tag.id, corners)], prior=prior).pose, truth)[1])
-    alone, with_prior = np.rad2deg(alone), np.rad2deg(with_prior)
-    assert np.mean(alone > 25.0) > 0.1              # the mirror pose is a real problem without the last pose
-    assert with_prior.max() < 25.0 and np.percentile(with_prior, 90) < np.percentile(alone, 90) / 2
-
-
-def test_a_lone_tags_pose_is_as_uncertain_as_its_mirror_is_likely():
-    """The same lone tag 5-25 deg off head-on: without a last pose the chosen pose is often the mirror,
-    and its covariance spans the mirror (the curvature of the chosen fit alone claimed a few degrees:
-    a third of the poses further off than 3 sigma); a last pose certain to 0.5 deg and 1 deg from the
-    truth rules the mirror out, and the pose is surer for it."""
-    from dmg_perception.estimator import TagObservation
-    from dmg_perception.tags import tag_corners
-
-    model = load_object("plug")
-    estimator = ObjectPoseEstimator([model])
-    intrinsics = np.array([[400.0, 0, 319.5], [0, 400.0, 239.5], [0, 0, 1]])
-    estimator.set_camera(intrinsics)
-    tag = model.apriltags[0]
-    rng = np.random.default_rng(11)
-    blind, settled = [], []        # (turn error, largest rotation sigma) [deg]
-    for _ in range(100):
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
         truth = from_rotation(Rotation.from_euler("xyz", [180 + rng.uniform(5, 25), rng.uniform(-10, 10),
                                                           rng.uniform(0, 360)], degrees=True).as_matrix(),
                               [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), 0.35])
         pixels = (tag_corners(tag) @ truth[:3, :3].T + truth[:3, 3]) @ intrinsics.T
         corners = pixels[:, :2] / pixels[:, 2:] + rng.normal(0.0, 0.5, (4, 2))
         axis = rng.normal(size=3)
-        prior = from_rotation(Rotation.from_rotvec(np.deg2rad(1.0) * axis / np.linalg.norm(axis)).as_matrix(),
-                              [0, 0, 0]) @ truth
-        for found, out in ((estimator.estimate([TagObservation(tag.id, corners)]), blind),
-                           (estimator.estimate([TagObservation(tag.id, corners)], prior=prior,
-                                               prior_covariance=np.diag([1e-8] * 3 + [np.deg2rad(0.5) ** 2] * 3)),
-                            settled)):
+        prior = from_rotation(Rotation.from_rotvec(np.deg2rad(prior_turn_deg) * axis / np.linalg.norm(axis))
+                              .as_matrix(), [0, 0, 0]) @ truth
+        yield estimator, [TagObservation(tag.id, corners)], truth, prior
+
+
+def test_a_lone_tag_seen_nearly_head_on_takes_the_mirror_pose_nearest_the_last_one():
+    """A lone tag's two IPPE poses (tilted either way) explain the corners alike and the better fitting
+    one is often the mirror (tens of degrees off). Given the last pose (here the truth turned 5 deg),
+    the estimator takes the one nearest it."""
+    alone, with_prior = [], []
+    for estimator, seen, truth, prior in lone_tag_views(7, 5.0):
+        alone.append(distance(estimator.estimate(seen).pose, truth)[1])
+        with_prior.append(distance(estimator.estimate(seen, prior=prior).pose, truth)[1])
+    alone, with_prior = np.rad2deg(alone), np.rad2deg(with_prior)
+    assert np.mean(alone > 25.0) > 0.1              # the mirror pose is a real problem without the last pose
+    assert with_prior.max() < 25.0 and np.percentile(with_prior, 90) < np.percentile(alone, 90) / 2
+
+
+def test_a_lone_tags_pose_is_as_uncertain_as_its_mirror_is_likely():
+    """Without a last pose the chosen pose is often the mirror, and its covariance spans the mirror (the
+    curvature of the chosen fit alone claimed a few degrees: a third of the poses further off than 3
+    sigma); a last pose certain to 0.5 deg and 1 deg from the truth rules the mirror out, and the pose
+    is surer for it."""
+    certain = np.diag([1e-8] * 3 + [np.deg2rad(0.5) ** 2] * 3)
+    blind, settled = [], []        # (turn error, largest rotation sigma) [deg]
+    for estimator, seen, truth, prior in lone_tag_views(11, 1.0):
+        for found, out in ((estimator.estimate(seen), blind),
+                           (estimator.estimate(seen, prior=prior, prior_covariance=certain), settled)):
             sigma = np.sqrt(np.linalg.eigvalsh(found.covariance[3:, 3:]).max())
             out.append(np.rad2deg([distance(found.pose, truth)[1], sigma]))
     blind, settled = np.array(blind), np.array(settled)
