@@ -96,6 +96,8 @@ class RunOutcome:
     goal_turn_deg: float     # and how far it is turned
     seen_position_error: float = math.nan   # m, the perceived grasp the plan starts from vs the true one
     seen_angle_error_deg: float = math.nan  # (after settling, arms still; NaN when the camera saw no tag)
+    end_judged: str = ""     # the executor's verdict on its end (OK or OUT_OF_TOLERANCE, from what it perceived)
+                             # against the truth: "right", "wrongly_out", "wrongly_within"; "" for other ends
 
 
 @dataclass(frozen=True)
@@ -199,9 +201,13 @@ def run_pair(loop, graph, model, surface, tags, pair: Pair, alpha: float, settin
     success = (result.outcome == Outcome.OK and position <= settings.position_tolerance
                and math.degrees(angle) <= settings.angle_tolerance_deg)
     name = result.outcome.name if result.outcome != Outcome.OK or success else "TRUTH_OUT_OF_TOLERANCE"
+    truly_within = position <= settings.position_tolerance and math.degrees(angle) <= settings.angle_tolerance_deg
+    judged = {Outcome.OK: True, Outcome.OUT_OF_TOLERANCE: False}.get(result.outcome)
+    end_judged = ("" if judged is None else "right" if judged == truly_within
+                  else "wrongly_within" if judged else "wrongly_out")
     return outcome(name, result.message, success=success, primitives=result.primitives_completed,
                    position_error=position, angle_error_deg=math.degrees(angle), tilt_deg=tilt,
-                   sim_time=result.duration, **perceived)
+                   sim_time=result.duration, end_judged=end_judged, **perceived)
 
 
 def summarise(runs: list[RunOutcome]) -> dict:
@@ -229,6 +235,8 @@ def summarise(runs: list[RunOutcome]) -> dict:
                 # perception at the start: the perceived grasp the plan starts from vs the true one
                 "seen_position_error_mm": quantiles(np.array([r.seen_position_error for r in seen]) * 1000),
                 "seen_angle_error_deg": quantiles(np.array([r.seen_angle_error_deg for r in seen])),
+                # the executor's verdicts on its end (from perception) against the truth
+                "end_judged": dict(Counter(r.end_judged for r in group if r.end_judged)),
                 "failures": dict(Counter(r.outcome for r in group if not r.success))}
 
     return {"overall": stats(runs),
@@ -257,11 +265,15 @@ def markdown(summary: dict, runs: list[RunOutcome]) -> str:
 
     def seen(name: str, s: dict) -> str:
         pos, ang = s.get("seen_position_error_mm", {}), s.get("seen_angle_error_deg", {})
+        judged = s.get("end_judged", {})
         return (f"| {name} | {pos.get('median', math.nan):.2f} / {pos.get('max', math.nan):.2f} | "
-                f"{ang.get('median', math.nan):.2f} / {ang.get('max', math.nan):.2f} |")
+                f"{ang.get('median', math.nan):.2f} / {ang.get('max', math.nan):.2f} | "
+                f"{judged.get('right', 0)}/{sum(judged.values())} | {judged.get('wrongly_out', 0)} | "
+                f"{judged.get('wrongly_within', 0)} |")
 
-    lines += ["", "| perception at the start (perceived vs true grasp) | position median / max [mm] | "
-              "angle median / max [deg] |", "|---|---|---|", seen("all", summary["overall"])]
+    lines += ["", "| perception (perceived vs true) | grasp at the start: position median / max [mm] | "
+              "angle median / max [deg] | ends judged right (OK or OUT_OF_TOLERANCE) | judged out, truly within | "
+              "judged within, truly out |", "|---|---|---|---|---|---|", seen("all", summary["overall"])]
     lines += [seen(o, s) for o, s in summary["by_object"].items()]
     lines += ["", "| object | pair | goal: shift [mm], turn [deg] | alpha | outcome | primitives | position [mm] | "
               "angle [deg] | tilt [deg] | sim s | message |", "|---|---|---|---|---|---|---|---|---|---|---|"]

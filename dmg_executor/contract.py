@@ -35,6 +35,7 @@ class Outcome(IntEnum):
     LIMIT_VIOLATION = 7
     OUT_OF_TOLERANCE = 8
     ROBOT_LOST = 9
+    INTERNAL_ERROR = 10
 
 
 @dataclass

@@ -23,6 +23,7 @@ belief of where the object is (held reference, dead reckoning of a push), then t
 """
 from __future__ import annotations
 
+import traceback
 from dataclasses import replace
 
 import numpy as np
@@ -55,6 +56,7 @@ class PlanExecutor:
         self.run = Run(settings, surface, primitives, principal_finger, float(alpha), start_time, camera, tags)
         self.state: State = FindContact()
         self.slip_streak = SlipStreak()
+        self.failure: str | None = None      # the traceback of an error of the executor's own that ended the run
 
     # --- public ------------------------------------------------------------------------------
     @property
@@ -107,12 +109,18 @@ class PlanExecutor:
         if self.done:
             return run.halt()
         run.last = observation
-        if run.holder_start is None:
-            run.begin(observation)
-            command = self._tick(observation)
-            command.pusher_grip = GripCommand(0.0, 0.0)     # pusher closed: its fingertips push together
-            return command
-        return self._tick(observation)
+        try:
+            if run.holder_start is None:
+                run.begin(observation)
+                command = self._tick(observation)
+                command.pusher_grip = GripCommand(0.0, 0.0)     # pusher closed: its fingertips push together
+                return command
+            return self._tick(observation)
+        except Exception as error:     # (a fault of its own must still stop the arms and keep the object held)
+            self.failure = traceback.format_exc()
+            run.finish(Outcome.INTERNAL_ERROR, f"the executor failed in {self.state_name} of primitive "
+                       f"{run.campaign.index}: {type(error).__name__}: {error}; stopped, gripper 1 closed at the hold force")
+            return run.halt()
 
     def cancel(self, reason: str = "cancelled on request") -> Command:
         return self.abort(Outcome.CANCELED, reason)

@@ -344,6 +344,8 @@ class ExecutorNode(Node):
                                      f"{age[0]:.2f} s (the oldest: {age[1]}): stopped")
         else:
             command = executor.update(self.observation())
+            if executor.failure is not None and executor.result.outcome == Outcome.INTERNAL_ERROR:
+                self.get_logger().error(executor.failure)
         self.finish(run, command)
         self.tick_finished = time.monotonic()
 

@@ -128,3 +128,24 @@ def test_a_slip_seen_with_nothing_touching_the_object_is_looked_at_again_once_be
     assert any("with nothing touching it: looked at again from other views" in note for note in executor.notes)
     seen_off(executor.settings.slip.poses + 2)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
+
+
+class _Faulty(ReturnHome):
+    """A state with a bug in it."""
+
+    def tick(self, run, obs):
+        raise ZeroDivisionError("a bug")
+
+
+def test_an_error_in_a_state_ends_the_run_internal_error_with_the_arms_still_and_the_object_held():
+    cell = box_cell()
+    executor = executor_for([translation([0.010, 0.0, 0.0])], cell)
+    executor.update(cell.observe())
+    executor.state = _Faulty()
+    command = executor.update(cell.observe())
+    result = executor.result
+    assert result.outcome == Outcome.INTERNAL_ERROR and "ZeroDivisionError: a bug" in result.message
+    assert "_Faulty" in result.message and "ZeroDivisionError" in executor.failure
+    assert not np.any(command.holder) and not np.any(command.pusher)
+    assert command.holder_grip.max_force == executor.settings.grip.hold_force
+    assert executor.update(cell.observe()).holder_grip.max_force == executor.settings.grip.hold_force
