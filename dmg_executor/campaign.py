@@ -108,17 +108,6 @@ class Campaign:
         return (float(np.linalg.norm(self.principal_contact(obs) - last.contact_after)),
                 distance(invert(obs.object_in_holder), last.gripper_after)[1])
 
-    def sigma_to_judge(self, obs: Observation) -> tuple[float, bool]:
-        """The plan's end judged from this pose: how certain of its position [m, standard deviation] a pose must be
-        to tell whether the grasp is within the goal's tolerances (its contact error `tolerances.judge_sigmas` of
-        them from the tolerance), and whether this pose's orientation is too uncertain to tell."""
-        t = self.settings.tolerances
-        position, angle = self.final_errors(obs)
-        if t.judge_sigmas <= 0.0:
-            return math.inf, False
-        return (abs(position - t.goal_position) / t.judge_sigmas,
-                abs(angle - t.goal_angle) < t.judge_sigmas * obs.object_turn_sigma)
-
     def error_and_tolerance(self, obs: Observation) -> tuple[float, float]:
         """The current primitive's remaining error and its tolerance (m for a translation, rad for a rotation
         and for the tilt a level push presses back), judged from the pose the tick goes by (not the latest

@@ -56,11 +56,6 @@ class Observation:
         return 0.0 if self.object_covariance is None else tilt_sigma(self.object_covariance)
 
     @property
-    def object_turn_sigma(self) -> float:
-        """rad, the object pose's standard deviation of orientation about its least certain axis."""
-        return 0.0 if self.object_covariance is None else turn_sigma(self.object_covariance)
-
-    @property
     def object_position_sigma(self) -> float:
         """m, the object pose's standard deviation of position along its least certain direction."""
         return 0.0 if self.object_covariance is None else position_sigma(self.object_covariance)
@@ -113,11 +108,6 @@ def _largest_sigma(covariance: np.ndarray, axes: slice) -> float:
 def tilt_sigma(covariance: np.ndarray) -> float:
     """rad: how uncertain a pose (holder frame) is in its turn off the grasp axis x (rotation about y, z)."""
     return _largest_sigma(covariance, slice(4, 6))
-
-
-def turn_sigma(covariance: np.ndarray) -> float:
-    """rad: how uncertain a pose is in its orientation, about its least certain axis."""
-    return _largest_sigma(covariance, slice(3, 6))
 
 
 def position_sigma(covariance: np.ndarray) -> float:

@@ -169,8 +169,7 @@ class PlanExecutor:
         # 7-10 mm off); the held pose is known.
         trusted, fresh = run.trusted(obs), run.fresh(obs)
         search = run.search
-        search.searching = search.searching and not (fresh and (not search.seeking_certain or (
-            run.trust.certain(obs) and obs.object_position_sigma <= search.wanted_sigma)))
+        search.searching = search.searching and not (fresh and (not search.seeking_certain or run.trust.certain(obs)))
         search.seeking_certain = search.seeking_certain and search.searching
         if self.state.pushing and s.push.blind:
             # The last pose moved on by the pusher's motion since its image: the image's latency made
@@ -277,8 +276,7 @@ class PlanExecutor:
         run = self.run
         if self.state.step == Step.EXECUTE or run.search.slip_doubted:
             return False     # (in a push the grip is loosened: the object may well have moved)
-        run.search.slip_doubted = True
-        run.search.seek_certain(self.settings.slip.position_sigma, self.settings.look.places)
+        run.search.slip_doubted = run.search.searching = run.search.seeking_certain = True
         run.note(f"{why}, with nothing touching it: looked at again from other views")
         self.slip_streak.clear()
         return True

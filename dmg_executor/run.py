@@ -119,13 +119,6 @@ class Search:
     searching: bool = False         # it went unseen on the way to a push: look for it
     seeking_certain: bool = False   # ... or the plan's end is to be judged from an uncertain pose: look for a certain one
     sought_certain: bool = False    # a look for a certain pose was made since the last push
-    wanted_sigma: float = 0.0       # m: how certain of its position the pose sought must be
-    places: int = 0                 # ... and the vantage places the look for it may go to
-
-    def seek_certain(self, wanted_sigma: float, places: int) -> None:
-        """Look for a pose certain of its position to `wanted_sigma`, from up to `places` vantage places."""
-        self.searching = self.seeking_certain = True
-        self.wanted_sigma, self.places = wanted_sigma, places
     slip_doubted: bool = False      # a slip seen with nothing touching the object was looked at again since the last push
 
 

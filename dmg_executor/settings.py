@@ -229,7 +229,6 @@ class ToleranceSettings:
     angle: float                   # rad
     goal_position: float
     goal_angle: float              # rad
-    judge_sigmas: float
 
 
 @dataclass(frozen=True)

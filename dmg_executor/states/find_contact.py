@@ -98,7 +98,8 @@ class FindContact(State):
                 campaign.pushes += not campaign.leveling
                 turns.far_side_pushed = True
                 return Command()
-            if last and self._end_uncertain(run, obs):
+            if last and self._end_uncertain(run):
+                search.sought_certain = search.seeking_certain = search.searching = True
                 return Transition.handover(look.Look())
             campaign.next_primitive()
             if campaign.over:
@@ -124,24 +125,11 @@ class FindContact(State):
         return Transition(approach.Approach())
 
     @staticmethod
-    def _end_uncertain(run: Run, obs: Observation) -> bool:
+    def _end_uncertain(run: Run) -> bool:
         """Is the plan's last primitive (or correction) about to be judged from a held pose too uncertain of its
-        position to tell a slip, or to tell whether the grasp is within the goal's tolerances
-        (`Campaign.sigma_to_judge`), with no look for a better one since the last push? Then the look seeks a pose
-        as certain as that takes: from vantage places round the grasp if the held pose cannot tell a slip, else
-        from where the pusher stands only (sim, plug: a lone tag seen obliquely at the end, 1.2-3.6 mm sigma, put
-        a grasp 2.5 mm from its goal 2.4-8.1 mm from it; a generated block, a pose 0.9 mm sure of itself put one
-        2.8 mm from its goal 4.7 mm from it; its vantage places took 20 s and gave nothing better)."""
-        held, search, s = run.held, run.search, run.settings
-        if search.sought_certain:
-            return False
-        wanted, angle_doubtful = run.campaign.sigma_to_judge(obs)
-        wanted = min(s.slip.position_sigma, wanted)
-        if not (held.uncertain or held.sigma > wanted or angle_doubtful):
-            return False
-        search.sought_certain = True
-        search.seek_certain(wanted, s.look.places if held.uncertain else 0)
-        return True
+        position to tell, with no look for a better one since the last push? (sim, plug: a lone tag seen
+        obliquely at the end, 1.2-3.6 mm sigma, put a grasp 2.5 mm from its goal 2.4-8.1 mm from it.)"""
+        return not run.search.sought_certain and run.held.uncertain
 
     @staticmethod
     def _no_push(run: Run, obs: Observation, primitive: Primitive, error: Exception) -> Command | Transition:

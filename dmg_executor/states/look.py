@@ -123,7 +123,7 @@ class Look(State):
         taken = self.poses[-run.settings.look.view_poses:]
         poses = np.array([pose for pose, _ in taken])
         sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
-        if len(poses) < 2 or sigma > run.search.wanted_sigma:
+        if len(poses) < 2 or sigma > run.settings.slip.position_sigma:
             return False
         run.held.take_mean(poses, sigma, seen.object_time)
         run.search.searching = run.search.seeking_certain = False
@@ -138,8 +138,7 @@ class Look(State):
             run.fruitless.append(apply(invert(obs.holder), self.place))
         if self.places is None:
             self.places = vantage_places(run, obs)
-        search = run.search
-        while self.places and self.gone_to < (search.places if search.seeking_certain else run.settings.look.places):
+        while self.places and self.gone_to < run.settings.look.places:
             place, orientation = self.places.pop(0)
             try:
                 run.route_to(obs, apply(invert(obs.holder), place), orientation)

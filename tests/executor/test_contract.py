@@ -1,4 +1,4 @@
-"""The contract (dmg_executor.contract): tilt, turn and position sigmas read off a pose covariance; outcomes as the
+"""The contract (dmg_executor.contract): tilt and position sigmas read off a pose covariance; outcomes as the
 action's result codes."""
 from __future__ import annotations
 
@@ -26,13 +26,6 @@ def test_position_sigma_reads_the_least_certain_direction_from_a_pose_covariance
     assert position_sigma(covariance) == pytest.approx(0.003 * np.sqrt(1.5))
     covariance[0, 0] = np.inf
     assert position_sigma(covariance) == np.inf
-
-
-def test_turn_sigma_reads_the_least_certain_axis_of_orientation():
-    from dmg_executor.contract import turn_sigma
-
-    covariance = np.diag([0.5**2, 0.5**2, 0.5**2, 0.03**2, 0.02**2, 0.01**2])   # positions do not count
-    assert turn_sigma(covariance) == pytest.approx(0.03)
 
 
 def test_every_outcome_is_the_actions_result_code_of_the_same_name():
