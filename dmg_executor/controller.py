@@ -118,8 +118,9 @@ class PlanExecutor:
             return self._tick(observation)
         except Exception as error:     # (a fault of its own must still stop the arms and keep the object held)
             self.failure = traceback.format_exc()
-            run.finish(Outcome.INTERNAL_ERROR, f"the executor failed in {self.state_name} of primitive "
-                       f"{run.campaign.index}: {type(error).__name__}: {error}; stopped, gripper 1 closed at the hold force")
+            failed = (f"the executor failed in {self.state_name} of primitive {run.campaign.index}: "
+                      f"{type(error).__name__}: {error}; stopped, gripper 1 closed at the hold force")
+            run.finish(Outcome.INTERNAL_ERROR, "; ".join([failed] + run.campaign.notes))
             return run.halt()
 
     def cancel(self, reason: str = "cancelled on request") -> Command:

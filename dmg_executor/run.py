@@ -169,10 +169,11 @@ class Run:
         return Command(holder_grip=held_grip(self.settings))
 
     def abort(self, outcome: Outcome, message: str) -> Command:
-        """End the run: stop both arms, grip tight, report the errors as last perceived."""
+        """End the run: stop both arms, grip tight, report the errors as last perceived and what the run did
+        before (its notes)."""
         last = self.last
         position, angle = self.campaign.final_errors(last) if last.object_in_holder is not None else (math.nan, math.nan)
-        self.finish(outcome, message, position, angle)
+        self.finish(outcome, "; ".join([message] + self.campaign.notes), position, angle)
         return self.halt()
 
     def finish(self, outcome: Outcome, message: str, position: float = math.nan, angle: float = math.nan) -> None:

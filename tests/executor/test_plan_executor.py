@@ -48,18 +48,20 @@ def test_the_object_leaving_the_grip_ends_the_run_object_lost_with_the_grip_clos
     assert command.holder_grip.max_force == executor.settings.grip.hold_force and not command.pusher.any()
 
 
-def test_a_step_that_does_not_finish_in_time_ends_the_run_step_timeout():
+def test_a_step_that_does_not_finish_in_time_ends_the_run_step_timeout_with_the_runs_notes():
     """(With the time limit under the time a stalled arm is given, the limit ends the run first.)"""
     cell = box_cell()
     stall_time = ExecutorSettings.defaults().approach.stall_time
     executor = executor_for([translation([0.010, 0.0, 0.0])], cell, **{"limits.step_timeout": stall_time / 2})
     executor.update(cell.observe())
+    executor.run.note("an earlier push went on unseen")
     while not executor.done:                             # the arms never move
         cell.time += 0.5
         cell.seen_at = cell.time
         executor.update(cell.observe())
     assert executor.result.outcome == Outcome.STEP_TIMEOUT, executor.result
     assert executor.result.message.startswith("APPROACH of primitive 0")
+    assert executor.result.message.endswith("; an earlier push went on unseen")
 
 
 def test_cancel_ends_the_run_and_every_later_tick_holds_the_object():
@@ -141,10 +143,12 @@ def test_an_error_in_a_state_ends_the_run_internal_error_with_the_arms_still_and
     cell = box_cell()
     executor = executor_for([translation([0.010, 0.0, 0.0])], cell)
     executor.update(cell.observe())
+    executor.run.note("a push went on unseen")
     executor.state = _Faulty()
     command = executor.update(cell.observe())
     result = executor.result
     assert result.outcome == Outcome.INTERNAL_ERROR and "ZeroDivisionError: a bug" in result.message
+    assert result.message.endswith("; a push went on unseen")      # what the run did before
     assert "_Faulty" in result.message and "ZeroDivisionError" in executor.failure
     assert not np.any(command.holder) and not np.any(command.pusher)
     assert command.holder_grip.max_force == executor.settings.grip.hold_force
