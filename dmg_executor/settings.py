@@ -25,6 +25,7 @@ class CampaignSettings:
     unreachable_cone: float        # rad
     shortfall_cone: float          # rad
     partial_miss_turn: float       # rad
+    judge_wait: float              # s
 
 
 @dataclass(frozen=True)

@@ -63,14 +63,19 @@ class ReturnHome(State):
     step = Step.LEAVE
 
     def __init__(self):
-        self.errors: tuple[float, float] | None = None   # the plan's end (m, rad), judged as the pusher sets off
+        self.since: float | None = None                  # when the pusher stopped to judge the plan's end
+        self.errors: tuple[float, float] | None = None   # the plan's end (m, rad), judged before the pusher sets off
 
     def tick(self, run: Run, obs: Observation) -> Command | Transition:
         if self.errors is None:
-            run.step_started = obs.time
-            if run.held.reference is None:
-                run.held.take(obs)
-            # Judged from where the plan ended (the pusher still, the grasp seen as the last push left it); on the
+            held, s = run.held, run.settings
+            if self.since is None:
+                self.since = run.step_started = obs.time
+                if held.reference is None:
+                    held.take(obs)
+            if len(held.poses) < s.slip.reference_poses and obs.time - self.since < s.campaign.judge_wait:
+                return Command()     # still: the held pose averages the poses seen meanwhile
+            # Judged from where the plan ended (the pusher still, the grasp as the last push left it); on the
             # way home the camera sees the object from afar and askew (sim: such poses put a grasp 1.8 mm from
             # its goal 3.2 mm from it).
             self.errors = run.campaign.final_errors(obs)
