@@ -43,10 +43,14 @@ def tilt_since(reference: np.ndarray, now: np.ndarray) -> float:
 
 def moved_in_grip(obs: Observation, held: HeldPose, s: ExecutorSettings) -> str | None:
     """How the object moved against the held reference, when this pose and the reference are both
-    certain enough of their position to tell and it moved more than `slip_distance`/`slip_angle`."""
+    certain enough of their position to tell and it moved more than `slip_distance`/`slip_angle`; a turn
+    counts only by a pose certain of its orientation too (sim, a generated bar: views after a blind push,
+    1.0 mm and 2.3-2.6 deg sure of themselves, turned 6.4-6.6 deg from a still object's reference)."""
     if held.reference is None or max(obs.object_position_sigma, held.sigma) > s.slip.position_sigma:
         return None     # no evidence either way
     moved, turned = distance(held.reference, obs.object_in_holder)
+    if obs.object_tilt_sigma > s.slip.tilt_sigma:
+        turned = 0.0
     if moved <= s.slip.distance and turned <= s.slip.angle:
         return None
     return (f"the object moved {moved * 1000:.1f} mm and {np.rad2deg(turned):.1f} deg in the closed grip "

@@ -54,6 +54,15 @@ def test_a_certain_pose_moved_past_slip_distance_in_the_closed_grip_is_a_slip():
     assert "in the closed grip" in moved_in_grip(seen(0.1, x=S.slip.distance * 1.2), held, S)
 
 
+def test_a_turn_in_the_closed_grip_is_a_slip_only_by_a_pose_certain_of_its_orientation():
+    held = held_at(seen(0.0))
+    turned = np.rad2deg(S.slip.angle) + 1.0
+    assert "in the closed grip" in moved_in_grip(seen(0.1, tilt_deg=turned), held, S)
+    unsure = np.rad2deg(S.slip.tilt_sigma) * 1.2
+    assert moved_in_grip(seen(0.1, tilt_deg=turned, tilt_sigma_deg=unsure), held, S) is None
+    assert "in the closed grip" in moved_in_grip(seen(0.1, x=S.slip.distance * 1.2, tilt_sigma_deg=unsure), held, S)
+
+
 def test_a_pose_too_uncertain_of_its_position_shows_no_slip_nor_does_an_uncertain_reference():
     far = S.slip.distance * 2
     assert moved_in_grip(seen(0.1, x=far, sigma=S.slip.position_sigma * 2), held_at(seen(0.0)), S) is None
