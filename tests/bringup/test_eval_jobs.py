@@ -297,7 +297,8 @@ def test_serial_run_writes_a_run_file_per_run(serial):
     assert alpha_1["position_error"] != alpha_0["position_error"]
     pairs = json.loads((output / "runs" / "box.pairs.json").read_text())
     assert pairs["pairs"] == 1 and len(pairs["goals"]) == 1
-    assert "perception at the start" in (output / "eval.md").read_text()
+    report_text = (output / "eval.md").read_text()
+    assert "| perception (perceived vs true) | grasp at the start" in report_text and "ends judged right" in report_text
     assert "box pair 0 alpha 1.0:" in result.stdout and "box pair 0 alpha 0.0:" in result.stdout
 
 
