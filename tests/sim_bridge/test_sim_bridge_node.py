@@ -65,10 +65,11 @@ class CellClient(RosTestNode):
         msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = (float(v) for v in angular)
         self.twist_pubs[role].publish(msg)
 
-    def drive(self, role: str, linear, seconds: float, rate: float = 50.0) -> None:
-        """Publish the same velocity at `rate` Hz for `seconds` of wall time."""
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
+    def drive(self, role: str, linear, seconds: float, rate: float = 50.0, wall_limit: float = 30.0) -> None:
+        """Publish the same velocity at `rate` Hz (wall clock) for `seconds` of simulated time (a loaded machine
+        runs the sim slower: so many sim seconds give the same number of robot states)."""
+        until, deadline = self.sim_time() + seconds, time.monotonic() + wall_limit
+        while self.sim_time() < until and time.monotonic() < deadline:
             self.twist(role, linear)
             self.spin(1.0 / rate)
 
