@@ -197,4 +197,8 @@ class Campaign:
         if not within:
             summary += (f", outside the tolerance of {s.tolerances.goal_position * 1000:.1f} mm and "
                         f"{np.rad2deg(s.tolerances.goal_angle):.1f} deg")
-        return within, "; ".join([summary] + self.notes)
+        return within, self.with_notes(summary)
+
+    def with_notes(self, message: str) -> str:
+        """A run's closing message followed by what it did (its notes)."""
+        return "; ".join([message] + self.notes)

@@ -120,7 +120,7 @@ class PlanExecutor:
             self.failure = traceback.format_exc()
             failed = (f"the executor failed in {self.state_name} of primitive {run.campaign.index}: "
                       f"{type(error).__name__}: {error}; stopped, gripper 1 closed at the hold force")
-            run.finish(Outcome.INTERNAL_ERROR, "; ".join([failed] + run.campaign.notes))
+            run.finish(Outcome.INTERNAL_ERROR, run.campaign.with_notes(failed))
             return run.halt()
 
     def cancel(self, reason: str = "cancelled on request") -> Command:

@@ -344,7 +344,7 @@ class ExecutorNode(Node):
                                      f"{age[0]:.2f} s (the oldest: {age[1]}): stopped")
         else:
             command = executor.update(self.observation())
-            if executor.failure is not None and executor.result.outcome == Outcome.INTERNAL_ERROR:
+            if executor.failure is not None:     # (set once, as the run ends: later ticks do not come here)
                 self.get_logger().error(executor.failure)
         self.finish(run, command)
         self.tick_finished = time.monotonic()

@@ -173,7 +173,7 @@ class Run:
         before (its notes)."""
         last = self.last
         position, angle = self.campaign.final_errors(last) if last.object_in_holder is not None else (math.nan, math.nan)
-        self.finish(outcome, "; ".join([message] + self.campaign.notes), position, angle)
+        self.finish(outcome, self.campaign.with_notes(message), position, angle)
         return self.halt()
 
     def finish(self, outcome: Outcome, message: str, position: float = math.nan, angle: float = math.nan) -> None:
