@@ -202,20 +202,10 @@ def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
     holder_in_object = invert(obs.object_in_holder)
     middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
     pushes, problems = [], []
-    for depth, off, along in itertools.product(s.level.levers, s.level.off_axis, (1.0, -1.0)):
+    for off, along in itertools.product(s.level.off_axis, (1.0, -1.0)):
         # (an axis turned `off` about the grasp axis: most of the turn, a little across it, the next push's)
         axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(run.campaign.level_axis)
-        try:
-            push = rotation_push(run.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
-                                 -angle, depth, 0.0, s.push.slant_limit, s.push.edge_margin)
-        except PushError as error:
-            problems.append(str(error))
-            continue
-        lever = rotation.T @ (push.point - middle)      # holder frame
-        if lever[2] < 0.0 and abs(lever[1]) < 2 * s.gripper.tip_radius:
-            problems.append(f"the level push at {np.round(lever * 1000, 1).tolist()} mm is between the fingers")
-            continue
-        pushes.append(push)
+        pushes += _level_levers(run, middle, rotation, axis, along, angle, problems)
     if not pushes:
         raise PushError("no level push: " + "; ".join(problems))
     candidates = _watched(run, obs, pushes, occluders)
@@ -229,6 +219,31 @@ def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
     if not candidates:
         raise PushError("no level push runs the way the pusher's fingers point where it started")
     return best_level_press(candidates, middle, rotation @ run.campaign.level_axis, reach)
+
+
+def _level_levers(run: Run, middle: np.ndarray, rotation: np.ndarray, axis: np.ndarray, along: float,
+                  angle: float, problems: list[str]) -> list[PushPoint]:
+    """Level presses about `axis` (holder frame), pushed along `along` times the grasp axis, at each of
+    `level.levers` the object's faces take clear of gripper 1's fingers, longest first (a small object
+    offers only short ones); why the others fail goes to `problems`."""
+    s = run.settings
+    pushes = []
+    for depth in s.level.levers:
+        try:
+            push = rotation_push(run.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
+                                 -angle, depth, 0.0, s.push.slant_limit, s.push.edge_margin)
+        except PushError as error:
+            problems.append(str(error))
+            continue
+        # The holding finger presses the same face at the grasp's middle: the pusher's tip must keep off it, beside
+        # it towards the palm, and beside or beyond its round tip (sim, plug: a 15 mm lever just beyond the tip
+        # jammed the pusher into it for 8 s).
+        lever = rotation.T @ (push.point - middle)      # holder frame
+        if np.hypot(lever[1], max(lever[2], 0.0)) < 2 * s.gripper.tip_radius:
+            problems.append(f"the level push at {np.round(lever * 1000, 1).tolist()} mm is on the holding finger")
+            continue
+        pushes.append(push)
+    return pushes
 
 
 def _rotation_points(run: Run, obs: Observation, directions: np.ndarray, angle: float, problems: list[str],

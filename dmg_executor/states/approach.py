@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from dmg_common.transforms import turn_between
 from dmg_executor.contract import Command, Observation, Step
 from dmg_executor.motion import loosened_grip
 from dmg_executor.routes import RouteError
@@ -66,12 +67,19 @@ class Approach(State):
 
     def _give_up(self, run: Run, obs: Observation) -> Command | Transition:
         """The arm cannot get where the push starts (a joint at its limit): at the push start, turn the
-        camera another way; else give the push up, take the pusher back to where it started (its arm
+        camera another way (one near where the wrist got to, if it stopped `approach.view_short` short); else
+        give the push up, take the pusher back to where it started (its arm
         untangled) and plan another push from there, never again one this way."""
-        push, route = run.push, run.pilot.route
-        if not route.on_the_way and push.other_views:
-            route.orientations[-1] = push.other_views.pop(0)
-            return Command()
+        push, route, s = run.push, run.pilot.route, run.settings
+        if not route.on_the_way:
+            if turn_between(route.orientations[-1], obs.pusher[:3, :3]) > s.approach.view_short:
+                # Its wrist at a limit: views further from where it got to are out of reach too, each costing
+                # a stall (sim, a bar: four views, 3-5 s each, 35-51 deg short; STEP_TIMEOUT at 25 s).
+                push.other_views = [view for view in push.other_views
+                                    if turn_between(view, obs.pusher[:3, :3]) <= s.approach.view_short]
+            if push.other_views:
+                route.orientations[-1] = push.other_views.pop(0)
+                return Command()
         run.memory.unreachable.append(push.direction)
         run.note(f"a push of primitive {run.campaign.index} given up: the pusher came no closer to waypoint "
                  f"{route.index + 1} of {len(route.waypoints)} in {run.settings.approach.stall_time:.1f} s")

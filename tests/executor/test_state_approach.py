@@ -82,3 +82,30 @@ def test_a_pusher_short_of_the_push_start_is_not_there_however_well_it_sees():
         cell.seen_at = cell.time
         outcome = state.tick(run, cell.observe())
     assert not isinstance(outcome.to, Execute)
+
+
+def test_a_wrist_stuck_far_short_of_the_push_starts_view_tries_only_the_views_near_where_it_got_to():
+    """At the push start, unseen, the wrist 40 deg short of the view wanted: of the other views, the one 10 deg
+    from where it got to is tried, the one 60 deg away is not (as far out of reach); then the push is given up."""
+    cell, run = planned_translation()
+    wanted = run.push.route.orientations[-1]
+
+    def turned(deg: float) -> np.ndarray:
+        return Rotation.from_rotvec(np.deg2rad(deg) * np.array([0.0, 0.0, 1.0])).as_matrix() @ wanted
+
+    near, far = turned(30.0), turned(-20.0)          # 10 deg and 60 deg from where the wrist stops
+    run.push.other_views = [far, near]
+    run.pilot.route.index = len(run.pilot.route.waypoints) - 1
+    cell.pusher[:3, 3], cell.pusher[:3, :3] = run.push.start, turned(40.0)
+    cell.seen_at = -np.inf                          # no tag in view from there
+    state, tried = Approach(), []
+    outcome = state.tick(run, cell.observe())
+    while isinstance(outcome, Command):             # the wrist does not turn
+        if not tried or tried[-1] is not run.pilot.route.orientations[-1]:
+            tried.append(run.pilot.route.orientations[-1])
+        cell.pusher[:3, :3] = turned(40.0)
+        cell.time += 0.1
+        outcome = state.tick(run, cell.observe())
+    assert [view is near for view in tried] == [False, True]     # the planned view, then the near one only
+    assert isinstance(outcome.to, Homeward) and len(run.memory.unreachable) == 1
+
