@@ -194,7 +194,8 @@ def _carry_point(run: Run, obs: Observation, holder_in_object: np.ndarray, motio
 def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
     """A push along the grasp axis on a face beside the grasp's middle that turns the object about the
     axis across it the tilt needs (`rotation_push` about that axis), beyond the fingertips or beside
-    the fingers, never between them towards the palm; one the camera sees from its start."""
+    the fingers, never between them towards the palm nor on the holding finger (`_level_levers`); one the
+    camera sees from its start."""
     s = run.settings
     tilt = run.campaign.tilt_off_goal(obs.object_in_holder)
     angle = float(np.linalg.norm(tilt))
@@ -227,11 +228,12 @@ def _level_levers(run: Run, middle: np.ndarray, rotation: np.ndarray, axis: np.n
     `level.levers` the object's faces take clear of gripper 1's fingers, longest first (a small object
     offers only short ones); why the others fail goes to `problems`."""
     s = run.settings
+    normal, direction = rotation @ axis, rotation @ np.array([along, 0.0, 0.0])      # object frame
     pushes = []
     for depth in s.level.levers:
         try:
-            push = rotation_push(run.surface, middle, rotation @ axis, rotation @ np.array([along, 0.0, 0.0]),
-                                 -angle, depth, 0.0, s.push.slant_limit, s.push.edge_margin)
+            push = rotation_push(run.surface, middle, normal, direction, -angle, depth, 0.0, s.push.slant_limit,
+                                 s.push.edge_margin)
         except PushError as error:
             problems.append(str(error))
             continue

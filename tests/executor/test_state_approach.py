@@ -108,4 +108,3 @@ def test_a_wrist_stuck_far_short_of_the_push_starts_view_tries_only_the_views_ne
         outcome = state.tick(run, cell.observe())
     assert [view is near for view in tried] == [False, True]     # the planned view, then the near one only
     assert isinstance(outcome.to, Homeward) and len(run.memory.unreachable) == 1
-
