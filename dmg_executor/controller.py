@@ -172,14 +172,15 @@ class PlanExecutor:
         search = run.search
         search.searching = search.searching and not (fresh and (not search.seeking_certain or run.trust.certain(obs)))
         search.seeking_certain = search.seeking_certain and search.searching
-        if self.state.pushing and s.push.blind:
-            # The last pose moved on by the pusher's motion since its image: the image's latency made
-            # up for, and the push goes on when the camera loses the object.
+        if self.state.pushing:     # the pusher's track and the last pose seen, with the pusher when its image was taken
             known = run.pushed.reckoning
             known.moved(obs.time, invert(obs.holder) @ obs.pusher)
             if fresh:
                 known.seen(obs.object_in_holder, obs.object_time)
-            elif not known.blind:
+        if self.state.pushing and s.push.blind:
+            # The last pose moved on by the pusher's motion since its image: the image's latency made
+            # up for, and the push goes on when the camera loses the object.
+            if not fresh and not known.blind:
                 known.blind = True
                 run.note(f"a push of primitive {campaign.index} went on unseen, on dead reckoning")
             run.reckoned, run.reckoned_time = known.believed(invert(obs.holder) @ obs.pusher), obs.time

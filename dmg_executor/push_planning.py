@@ -19,7 +19,15 @@ from dmg_executor.contract import Observation
 from dmg_executor.fingertips import fingertip_shells, meeting_start, push_start, sweep_to_touch
 from dmg_executor.grip import GRAVITY, tilt_hold_force
 from dmg_executor.motion import Route, carrying_grip
-from dmg_executor.push_points import PushError, PushPoint, exit_normals, rotation_push, straddle_push, translation_push
+from dmg_executor.push_points import (
+    PushError,
+    PushPoint,
+    exit_normals,
+    reasons,
+    rotation_push,
+    straddle_push,
+    translation_push,
+)
 from dmg_executor.routes import KeepOut, RouteError
 from dmg_executor.run import Push, Run
 from dmg_executor.sight import distinct
@@ -83,15 +91,15 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
             except PushError as error:
                 problems.append(str(error))
         if not pushes:
-            raise PushError("; ".join(problems))
+            raise PushError(reasons(problems))
         try:
             candidates = _watched(run, obs, pushes, occluders)
         except (PushError, RouteError) as error:
-            raise PushError("; ".join([*problems, str(error)])) from None
+            raise PushError(reasons([*problems, str(error)])) from None
         # A carry needs the camera on it: nothing else tells that the object follows the tips down.
         candidates = [c for c in candidates if c[1] > 0 or not c[0].carry or not run.sight.modelled]
         if not candidates:
-            raise PushError("; ".join([*problems, ("the wrist camera would see none of the object's tags where "
+            raise PushError(reasons([*problems, ("the wrist camera would see none of the object's tags where "
                                                    "the only push, a carry, starts")]))
         # The most progress: the full motion when the camera can watch it; a push rather than a carry unless
         # the carry goes a tolerance further (a push's force is the pusher's own, a carry's the weight's share).
@@ -120,7 +128,7 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
                 continue
             if candidates:   # first of the best seen: the longest lever beyond the tips
                 return max(candidates, key=lambda candidate: candidate[1])[0]
-    raise PushError("; ".join(problems))
+    raise PushError(reasons(problems))
 
 
 def _straddle_point(run: Run, holder_in_object: np.ndarray) -> PushPoint:
@@ -188,7 +196,7 @@ def _carry_point(run: Run, obs: Observation, holder_in_object: np.ndarray, motio
             problems.append(str(error))
             continue
         return [replace(point, carry=True)]
-    raise PushError("no carry: " + "; ".join(problems))
+    raise PushError("no carry: " + reasons(problems))
 
 
 def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
@@ -208,7 +216,7 @@ def _level_push(run: Run, obs: Observation, occluders: Occluders) -> Push:
         axis = Rotation.from_rotvec([off, 0.0, 0.0]).apply(run.campaign.level_axis)
         pushes += _level_levers(run, middle, rotation, axis, along, angle, problems)
     if not pushes:
-        raise PushError("no level push: " + "; ".join(problems))
+        raise PushError("no level push: " + reasons(problems))
     candidates = _watched(run, obs, pushes, occluders)
     if not s.push.blind:
         candidates = [c for c in candidates if c[1] > 0]
@@ -324,7 +332,7 @@ def _watched(run: Run, obs: Observation, pushes: list, occluders: Occluders) -> 
         except RouteError as error:
             problems.append(str(error))
     if not candidates:
-        raise RouteError("; ".join(problems))
+        raise RouteError(reasons(problems))
     if not run.sight.modelled:
         return candidates
     seen = [c for c in candidates if c[1] > 0]

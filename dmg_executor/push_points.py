@@ -23,6 +23,14 @@ class PushError(ValueError):
     """No usable push point for a primitive; the message says why."""
 
 
+def reasons(problems: list[str]) -> str:
+    """Why no candidate served, each reason once in the order met, with how many candidates it ruled out."""
+    counts: dict[str, int] = {}
+    for problem in problems:
+        counts[problem] = counts.get(problem, 0) + 1
+    return "; ".join(problem if n == 1 else f"{problem} ({n} candidates)" for problem, n in counts.items())
+
+
 @dataclass
 class PushPoint:
     point: np.ndarray       # on the surface, object frame [m]
@@ -162,7 +170,7 @@ def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, t
         normal = sides[0].normal + sides[1].normal
         return PushPoint((sides[0].point + sides[1].point) / 2, normal / np.linalg.norm(normal),
                          direction / np.linalg.norm(direction), float(np.linalg.norm(line)))
-    raise PushError("; ".join(problems) or "no straddle spread given")
+    raise PushError(reasons(problems) or "no straddle spread given")
 
 
 def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:

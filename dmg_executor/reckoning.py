@@ -54,6 +54,12 @@ class Reckoning:
             moved[:3, 3] = travel * self.direction
         return moved @ self.pose
 
+    def swept(self, pusher: np.ndarray | None = None) -> float:
+        """rad the tip has swept round the grasp axis past where it meets the face (in the push's sense), with
+        the pusher at `pusher` (holder frame; default: where it was when the last seen pose's image was taken,
+        the sweep that pose's turn is to be compared with)."""
+        return self._past_touch(self.pusher if pusher is None else pusher)
+
     @property
     def _sense(self) -> float:
         """+1 if the push turns the object positively about x."""

@@ -43,7 +43,8 @@ class Execute(State):
     def __init__(self):
         self.phase = Phase.LOOSEN
         self.grip_until = 0.0
-        self.turn_mark: tuple[float, float] | None = None   # (pusher, object) turned [rad] when the object last gained
+        self.turn_mark: tuple[float, float] | None = None   # (tip swept, object turned) [rad] when the object was
+        #                                                     last seen to gain
         self.sweep_to_face = 0.0   # rad a rotation's pusher turns before its tips meet the face (as seen when it began)
         self.carried_from: tuple[np.ndarray, np.ndarray] | None = None   # (pusher, object) positions, holder frame,
         #                                                          when a carry began to let the object down
@@ -206,9 +207,14 @@ class Execute(State):
             if abs(turn) <= s.tolerances.angle or left * np.sign(budget) <= s.tolerances.angle / 2:
                 return self._tighten(run, obs)
             pusher_turned = abs(turned_since(pushed.pusher, invert(obs.holder) @ obs.pusher))
-            stalled = self._turn_stalled(run, pusher_turned, turned)
+            known = pushed.reckoning
+            if run.fresh(obs):      # the last seen pose, with the tip's sweep when its image was taken
+                swept, seen_turned = known.swept(), abs(turned_since(pushed.reference, known.pose))
+            else:                   # unseen: the believed pose, which follows the sweep (no stall to tell)
+                swept, seen_turned = known.swept(invert(obs.holder) @ obs.pusher), abs(turned)
+            stalled = self._turn_stalled(run, swept, seen_turned)
             missed = self.turn_mark is None and pusher_turned > self.sweep_to_face + s.push.missed_turn
-            if (stalled and abs(turned) < s.push.turn_gain) or missed:
+            if (stalled and seen_turned < s.push.turn_gain) or missed:
                 # No turn to show for it (a stall after a noise 'gain', or none at all): turning in the air.
                 mark_missed(run, f"a rotation push of primitive {campaign.index} missed the object (it turned "
                                  f"{np.rad2deg(turned):.1f} deg): not tried there again")
@@ -286,16 +292,21 @@ class Execute(State):
         seen_way = way > run.settings.push.turn_gain and float(turned @ campaign.level_axis) > 0.0
         return float(tilt @ (turned / way if seen_way else campaign.level_axis))
 
-    def _turn_stalled(self, run: Run, pusher_turned: float, turned: float) -> bool:
-        """Has the pusher turned `turn_stall` on since the object last gained `push.turn_gain` with it? Then it
-        no longer turns the object but shoves it out of the grip (sim: bracket and plug stuck at 31 deg
-        - the pusher slid along the face into a corner - then 8-38 deg of tilt within 0.5 s). Counted
-        from the object's first gain: the pusher takes up the contact's slack first. Both in rad, absolute."""
-        mark, gain = self.turn_mark, run.settings.push.turn_gain
-        if abs(turned) >= (gain if mark is None else mark[1] + gain):
-            self.turn_mark = (pusher_turned, abs(turned))
+    def _turn_stalled(self, run: Run, swept: float, turned: float) -> bool:
+        """Has the pusher's tip swept `turn_stall` round the grasp axis since the object was last seen to gain
+        `push.turn_gain` with it? Then it no longer turns the object but shoves it out of the grip (sim: bracket
+        and plug stuck at 31 deg - the pusher slid along the face into a corner - then 8-38 deg of tilt within
+        0.5 s). `turned` is the object's turn since the push began as last seen, `swept` the tip's sweep when
+        its image was taken (rad, absolute): the pose believed between images follows the pusher by
+        construction, and the pusher's own turn leaves out the sweep it makes along the push line (sim, a
+        plate: the arm overran the touch by 1.5 deg of sweep, the believed turn ran ahead of every seen one,
+        and pushes 'stalled' after 1-2 deg). Counted from the object's first gain: the pusher takes up the
+        contact's slack first."""
+        push, mark = run.settings.push, self.turn_mark
+        if turned >= (push.turn_gain if mark is None else mark[1] + push.turn_gain):
+            self.turn_mark = (swept, turned)
             return False
-        return mark is not None and pusher_turned - mark[0] > run.settings.push.turn_stall
+        return mark is not None and swept - mark[0] > push.turn_stall
 
     @staticmethod
     def _tilt_slide(run: Run, obs: Observation) -> float:

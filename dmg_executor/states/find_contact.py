@@ -153,7 +153,7 @@ class FindContact(State):
         # No push can do (the rest of) it: the next primitive aims at its own target from here,
         # and the result says what was left and why.
         failed = None if campaign.leveling else primitive.kind
-        run.note(f"primitive {campaign.index} ({failed.name.lower() if failed else 'level press'}) left at "
+        run.note(f"primitive {campaign.index} ({'level press' if failed is None else failed.name.lower()}) left at "
                  f"{campaign.errors[0] * 1000:.1f} mm, {np.rad2deg(campaign.errors[1]):.1f} deg: no safe push: {error}")
         campaign.next_primitive()
         if campaign.over:

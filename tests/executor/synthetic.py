@@ -51,6 +51,19 @@ def translation(shift_in_object) -> Primitive:
                      contact(after, -1), 0.0, 0.0, contact(before, 1), contact(after, 1), after)
 
 
+def rotation(angle_deg: float) -> Primitive:
+    """A rotation of the grasp by `angle_deg` about its own axis (the box's z) from `grasped_box()`."""
+    before = invert(grasped_box())
+    after = before.copy()
+    after[:3, :3] = before[:3, :3] @ Rotation.from_rotvec([np.deg2rad(angle_deg), 0.0, 0.0]).as_matrix()
+
+    def contact(grip: np.ndarray, side: float) -> np.ndarray:
+        return grip[:3, :3] @ [side * OPENING / 2, 0.0, 0.0] + grip[:3, 3]
+
+    return Primitive(PrimitiveKind.ROTATION, np.deg2rad(angle_deg), np.zeros(3), contact(before, -1),
+                     contact(after, -1), 0.0, 0.0, contact(before, 1), contact(after, 1), after)
+
+
 @dataclass
 class SyntheticCell:
     """The grippers' poses (base frame), the object as held and as last seen, and the clock."""

@@ -2,13 +2,17 @@
 belief, states and their transitions - from the first observation to the result, without MuJoCo."""
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
 
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dmg_common.transforms import apply, invert
 from dmg_executor.contract import Outcome, Step
 from dmg_executor.controller import PlanExecutor
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.states.leave import ReturnHome
-from synthetic import box_cell, box_run, translation
+from synthetic import box_cell, box_run, rotation, translation
 
 
 def executor_for(primitives, cell, **overrides) -> PlanExecutor:
@@ -130,6 +134,55 @@ def test_a_slip_seen_with_nothing_touching_the_object_is_looked_at_again_once_be
     assert any("with nothing touching it: looked at again from other views" in note for note in executor.notes)
     seen_off(executor.settings.slip.poses + 2)
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
+
+
+def _rotation_run(follow: float, give: float, stuck_after_deg: float = np.inf) -> PlanExecutor:
+    """A 20 deg rotation of the box on the synthetic cell, to its end. Once the pusher's tip has pressed `give`
+    [m] into the box, the box turns about the grasp axis `follow` deg per deg the tip sweeps round it,
+    up to `stuck_after_deg` (then it sticks: the pusher slides on along the face). The camera's images come
+    every other tick, each a tick old when it arrives; the arms take up a commanded twist with a lag (a
+    pusher closing its gap overruns the face as the push begins)."""
+    cell = box_cell()
+    executor = executor_for([rotation(20.0)], cell)
+    surface, tip_radius = executor.run.surface, executor.settings.gripper.tip_radius
+    start, image, turned = cell.object_in_holder.copy(), (cell.object_in_holder.copy(), cell.time), 0.0
+    holder_twist, pusher_twist = np.zeros(6), np.zeros(6)
+    while not executor.done and cell.time < 120.0:
+        command = executor.update(replace(cell.observe(), object_in_holder=image[0], object_time=image[1]))
+        if round(cell.time / 0.02) % 2 == 0:
+            image = (cell.object_in_holder.copy(), cell.time)
+        holder_twist += 0.3 * (command.holder - holder_twist)
+        pusher_twist += 0.3 * (command.pusher - pusher_twist)
+        command = replace(command, holder=holder_twist.copy(), pusher=pusher_twist.copy())
+        before = apply(invert(cell.holder), cell.pusher[:3, 3])
+        cell.move(command, seen=False)
+        after = apply(invert(cell.holder), cell.pusher[:3, 3])     # (holder frame: the grasp axis is x)
+        swept = float(np.arctan2(before[1] * after[2] - before[2] * after[1], before[1:] @ after[1:]))
+        # the tip presses along its arc round the grasp axis, `give` into the face before the box turns
+        ahead = np.sign(swept) * np.cross([1.0, 0.0, 0.0], after) / max(np.linalg.norm(after[1:]), 1e-9)
+        touching = surface.inside(apply(invert(cell.object_in_holder), after + (tip_radius + give) * ahead)[None])[0]
+        if executor.step == Step.EXECUTE and touching and abs(np.rad2deg(turned)) < stuck_after_deg:
+            turn = np.eye(4)
+            turn[:3, :3] = Rotation.from_rotvec([follow * swept, 0.0, 0.0]).as_matrix()
+            cell.object_in_holder = turn @ cell.object_in_holder
+            turned = Rotation.from_matrix(cell.object_in_holder[:3, :3] @ start[:3, :3].T).as_rotvec()[0]
+    return executor
+
+
+def test_a_rotation_push_whose_object_turns_slower_than_the_pusher_sweeps_is_not_taken_for_stalled():
+    """The box turns only after the contact's give and then 0.75 deg per deg of the tip's sweep, seen every
+    other tick: one push does the rotation, none is stopped as stalled or missed."""
+    executor = _rotation_run(follow=0.75, give=0.0015)
+    assert executor.result.outcome == Outcome.OK, executor.result
+    assert not any("stopped" in note or "missed" in note for note in executor.notes), executor.notes
+
+
+def test_a_rotation_push_whose_object_sticks_is_stopped_within_the_stall_sweep():
+    """The box sticks after 5 deg: the push stops (grip closed) before the pusher has swept much further."""
+    executor = _rotation_run(follow=0.75, give=0.0015, stuck_after_deg=5.0)
+    stalls = [note for note in executor.notes if "stopped turning with the pusher" in note]
+    assert stalls, executor.notes
+    assert abs(float(stalls[0].split("stopped after ")[1].split(" deg")[0])) < 5.0 + 2.0, stalls[0]
 
 
 class _Faulty(ReturnHome):

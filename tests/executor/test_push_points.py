@@ -109,3 +109,11 @@ def test_a_straddle_push_meets_the_palm_side_face_either_side_of_the_fingers_and
     with pytest.raises(PushError, match="40 mm apart: straddle push: the push line misses the object; 56 mm apart"):
         straddle_push(plate, [-0.045, -0.0105, 0.004], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], halves, limit,
                       RULES.push.translation_slant)
+
+
+def test_the_reasons_no_candidate_served_are_each_given_once_with_how_many_it_ruled_out():
+    from dmg_executor.push_points import reasons
+
+    assert reasons(["the push line misses the object", "no view", "the push line misses the object"]) == \
+        "the push line misses the object (2 candidates); no view"
+    assert reasons([]) == ""

@@ -38,6 +38,8 @@ def test_dead_reckoning_turns_the_object_as_far_as_the_pusher_tip_swept_round_th
                                atol=1e-9)
     reckoning.moved(2.0, pusher_at(-0.1))
     reckoning.seen(known, at=2.5)     # an image of 2.5 s: the turn counts from the pusher at 2.0 s
+    assert abs(reckoning.swept() - 0.1) < 1e-9     # (the tip had swept 0.1 rad in the push's sense then)
+    assert abs(reckoning.swept(pusher_at(-0.25)) - 0.25) < 1e-9
     np.testing.assert_allclose(reckoning.believed(pusher_at(-0.25)), _pose((-0.15, 0.0, 0.0)) @ known, atol=1e-9)
     np.testing.assert_allclose(reckoning.believed(pusher_at(0.1)), known, atol=1e-12)   # backing off turns nothing
 

@@ -10,7 +10,7 @@ from dmg_executor.states.base import Transition
 from dmg_executor.states.find_contact import FindContact
 from dmg_executor.states.leave import ReturnHome
 from dmg_executor.states.look import Look
-from synthetic import box_cell, box_run, translation
+from synthetic import box_cell, box_run, rotation, translation
 
 
 def test_a_translation_is_planned_as_a_push_square_onto_the_face_towards_the_pusher():
@@ -61,3 +61,18 @@ def test_the_last_primitive_finished_as_seen_with_the_holder_turned_is_judged_on
     assert not isinstance(outcome, Transition)
     assert run.holder_turns.far_side_pushed and not run.campaign.over
     assert run.campaign.pushes == 1           # (the look counts as a push: such turns are bounded)
+
+
+def test_a_rotation_no_push_can_do_is_left_with_a_note_naming_it_and_each_reason_once():
+    """(Rotation is kind 0: the note once called it a level press.) Here every rotation push lies within a
+    50 mm edge margin, and the holder may not turn the object for another."""
+    cell = box_cell()
+    run = box_run([rotation(20.0)], cell, **{"push.edge_margin": 0.05, "holder.turn_deg": 0.0})
+    obs = cell.observe()
+    run.campaign.measure(obs)
+    outcome = FindContact().tick(run, obs)
+    assert not isinstance(outcome, Transition) and run.campaign.index == 1
+    note = run.campaign.notes[0]
+    assert note.startswith("primitive 0 (rotation) left at 0.0 mm, -20.0 deg: no safe push: rotation: "), note
+    reasons = note.split("no safe push: ")[1].split("; ")
+    assert len(reasons) == len(set(reasons)) > 1
