@@ -66,7 +66,7 @@ class ClosedLoop:
         grey = cv2.cvtColor(cell.render(), cv2.COLOR_RGB2GRAY)
         holder_from_camera = invert(cell.grasp_pose("arm1")) @ cell.camera_pose()
         estimate = self.estimator.estimate(self.estimator.detect(grey), holder_from_camera, cell.object.name,
-                                           self.seen, self.seen_covariance)
+                                           self.seen, self.seen_covariance, held=True)
         if estimate is not None:
             self.seen, self.seen_time, self.seen_covariance = estimate.pose, cell.time, estimate.covariance
 

@@ -4,8 +4,9 @@ Per tag, cv2.aruco finds the corners (sub-pixel corner refinement) and solvePnP'
 IPPE_SQUARE gives its two candidate poses; every candidate proposes an object pose through
 the object's tag layout. The proposal that explains the most tags (each tag's corners
 within `inlier_threshold` pixels) wins - of proposals that explain them about as well (a
-lone tag seen obliquely has two, its pose mirrored), the one nearest the object's last
-pose, when given -, tags it cannot explain are rejected as outliers
+lone tag seen obliquely has two, its pose mirrored), those that hold the object squarely in
+the gripper when the frame is the holding gripper's (held.py), then the one nearest the
+object's last pose, when given -, tags it cannot explain are rejected as outliers
 (a misdetection, a tag of another object), and the pose is refined by Levenberg-Marquardt
 over all corners of the inlier tags. Quality = RMS reprojection error over those corners;
 covariance = sigma^2 (J^T J)^-1 of the reprojection, with sigma the residual's standard
@@ -23,6 +24,7 @@ from scipy.spatial.transform import Rotation
 from scipy.special import expit
 
 from dmg_common.transforms import distance, from_rotation, invert
+from dmg_perception.held import HeldShape
 from dmg_perception.tags import detector, tag_corners, tag_pose
 from dmg_planner.objects import ObjectModel
 
@@ -66,11 +68,14 @@ def _matrix(rvec, tvec) -> np.ndarray:
 
 class ObjectPoseEstimator:
     def __init__(self, objects: list[ObjectModel], inlier_threshold: float = 3.0, pixel_noise: float = 0.3,
-                 prior_turn: float = np.deg2rad(3.0)):
+                 prior_turn: float = np.deg2rad(3.0), held_tilt: float = np.deg2rad(10.0)):
         self.inlier_threshold = inlier_threshold
         self.pixel_noise = pixel_noise
         self.prior_turn = prior_turn     # rad: the least rotation uncertainty of a last pose that settles a mirror
+        self.held_tilt = held_tilt       # rad: a mirror this much less square in the grip is not the held object (0: off)
         self.detector = detector()
+        self.models = {model.name: model for model in objects}
+        self.held_shapes: dict[str, HeldShape | None] = {}     # built when first needed (None: its mesh unreadable)
         self.tags: dict[int, tuple[str, object]] = {}
         for model in objects:
             for tag in model.apriltags:
@@ -121,11 +126,13 @@ class ObjectPoseEstimator:
 
     def estimate(self, observations: list[TagObservation], frame_from_camera: np.ndarray | None = None,
                  object_name: str | None = None, prior: np.ndarray | None = None,
-                 prior_covariance: np.ndarray | None = None) -> ObjectEstimate | None:
+                 prior_covariance: np.ndarray | None = None, held: bool = False) -> ObjectEstimate | None:
         """The object's pose (in the frame `frame_from_camera` maps the camera into; default the
-        camera) from the observations; None when none of its tags is explained. `prior`: its last
-        pose in that frame (with its covariance, when known), which settles between proposals that
-        explain the tags alike - as far as it can tell them apart."""
+        camera) from the observations; None when none of its tags is explained. `held`: that frame is
+        the holding gripper's (x: the grasp axis through the object), so of proposals that explain the
+        tags alike, those that hold the object more than `held_tilt` less squarely than another are
+        dropped. `prior`: its last pose in that frame (with its covariance, when known), which settles
+        between the rest - as far as it can tell them apart."""
         object_name = object_name or self.identify(observations)
         mine = [o for o in observations if o.id in self.tags and self.tags[o.id][0] == object_name]
         if not mine:
@@ -145,6 +152,9 @@ class ObjectPoseEstimator:
         best = min(explaining, key=lambda proposal: proposal[1])
         alike = [proposal for proposal in explaining if proposal[1] <= best[1] + AMBIGUOUS_PX * max(most, 1)]
         to_frame = np.eye(4) if frame_from_camera is None else frame_from_camera
+        if held and len(alike) > 1:
+            alike = self._held_squarely(object_name, alike, to_frame)
+            best = best if any(proposal is best for proposal in alike) else min(alike, key=lambda proposal: proposal[1])
         if prior is not None and len(alike) > 1:
             best = min(alike, key=lambda proposal: distance(to_frame @ proposal[2], prior)[1])
         chosen = best[2]
@@ -155,6 +165,9 @@ class ObjectPoseEstimator:
         points = np.concatenate([layout[o.id] for o in inliers])
         pixels = np.concatenate([o.corners for o in inliers])
         camera_from_object = self._refine(chosen, points, pixels)
+        if held and (self._off_square(object_name, to_frame @ camera_from_object)
+                     > self._off_square(object_name, to_frame @ chosen) + self.held_tilt):
+            camera_from_object = chosen     # (refined from a lone tag's pose, it slid into the mirror's minimum)
         errors = self._errors(camera_from_object, mine, layout)
         for observation, error in zip(mine, errors):
             observation.reprojection_error = float(error)
@@ -173,6 +186,24 @@ class ObjectPoseEstimator:
         covariance = self._covariance(camera_from_object, to_frame, points, residual, rivals)
         return ObjectEstimate(object_name, pose, covariance, rms, sorted(o.id for o in used),
                               sorted(o.id for o in mine if o not in used))
+
+    def _held_squarely(self, object_name: str, proposals: list, to_frame: np.ndarray) -> list:
+        """The proposals (camera_from_object last) that hold the object within `held_tilt` as squarely in the
+        gripper as the squarest of them (all of them without a usable mesh, or with the check off)."""
+        off = np.array([self._off_square(object_name, to_frame @ proposal[2]) for proposal in proposals])
+        return [proposal for proposal, tilt in zip(proposals, off) if tilt <= off.min() + self.held_tilt]
+
+    def _off_square(self, object_name: str, object_in_gripper: np.ndarray) -> float:
+        """rad off square in the holding gripper (held.py); 0 with the check off or no usable mesh."""
+        if self.held_tilt <= 0.0:
+            return 0.0
+        if object_name not in self.held_shapes:
+            try:
+                self.held_shapes[object_name] = HeldShape.of(self.models[object_name])
+            except (KeyError, ValueError):
+                self.held_shapes[object_name] = None
+        shape = self.held_shapes[object_name]
+        return 0.0 if shape is None else shape.off_square(object_in_gripper)
 
     def _refine(self, start: np.ndarray, points: np.ndarray, pixels: np.ndarray) -> np.ndarray:
         """Levenberg-Marquardt (OpenCV) on the rotation relative to `start`: the object points are

@@ -62,7 +62,7 @@ class PerceptionNode(Node):
                     raise
                 self.get_logger().error(f"{error}; perception goes on without it")
         estimator = ObjectPoseEstimator(models, values["inlier_threshold"], values["pixel_noise"],
-                                        np.deg2rad(values["prior_turn"]))
+                                        np.deg2rad(values["prior_turn"]), np.deg2rad(values["held_tilt"]))
         self.tracker = Tracker(estimator, values["lost_timeout"], values["pose_tolerance"], values["object"])
         self.lock = threading.Lock()            # guards the tracker's buffers and the pending image
         self.pending: Image | None = None

@@ -77,7 +77,8 @@ class Tracker:
                 result.camera_from_frame = invert(frame_from_camera)
                 last = self.prior(stamp)
                 result.estimate = self.estimator.estimate(result.observations, frame_from_camera, self.object_name,
-                                                          last.pose if last else None, last.covariance if last else None)
+                                                          last.pose if last else None, last.covariance if last else None,
+                                                          held=True)
                 if result.estimate is None:
                     known = [o.id for o in result.observations if o.id in self.estimator.tags]
                     result.problem = ("no tag of the object in view" if not known else
