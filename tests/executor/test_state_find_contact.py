@@ -76,3 +76,55 @@ def test_a_rotation_no_push_can_do_is_left_with_a_note_naming_it_and_each_reason
     assert note.startswith("primitive 0 (rotation) left at 0.0 mm, -20.0 deg: no safe push: rotation: "), note
     reasons = note.split("no safe push: ")[1].split("; ")
     assert len(reasons) == len(set(reasons)) > 1
+
+
+def _slab_to_press(holder_turned_deg: float):
+    """A run about to press level a 40 x 60 x 60 mm slab held across its 40 mm side, tilted 3.5 deg about gripper
+    1's fingers; the pusher's fingers (at home) point across the grasp axis, so a press along it needs the holder
+    turned a quarter turn about its fingers first. Gripper 1 has turned `holder_turned_deg` about its grasp axis
+    since the run began (at alpha 0 a rotation's pushes turn it)."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.run import Run
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.objects import Box, box_union_mesh
+    from dmg_planner.primitives import Primitive, PrimitiveKind
+    from synthetic import SyntheticCell, pose
+
+    surface = ObjectSurface(*box_union_mesh([Box(np.zeros(3), np.array([0.040, 0.060, 0.060]))]), mass=0.05)
+    contacts = [np.array([side * 0.020, 0.0, 0.0]) for side in (-1.0, 1.0)]
+    goal = Primitive(PrimitiveKind.TRANSLATION, 0.0, np.zeros(3), contacts[0], contacts[0], 0.0, 0.0,
+                     contacts[1], contacts[1], np.eye(4))
+    held = np.eye(4)
+    held[:3, :3] = Rotation.from_euler("z", 3.5, degrees=True).as_matrix()
+    cell = SyntheticCell(pose([0.55, 0.10, 0.15], [180, 0, 0]), pose([0.51, -0.02, 0.15], [-90, 0, 0]), held)
+    run = Run(ExecutorSettings.defaults(), surface, [goal], 0, 1.0, cell.time, None, None)
+    run.begin(cell.observe())
+    run.campaign.level_index = 0       # the press after the plan
+    cell.holder[:3, :3] = cell.holder[:3, :3] @ Rotation.from_euler("x", holder_turned_deg, degrees=True).as_matrix()
+    obs = cell.observe()
+    run.last = obs
+    run.campaign.measure(obs)
+    return run, obs
+
+
+def test_a_level_press_along_the_grasp_axis_is_reached_by_a_quarter_turn_of_the_holder_about_its_fingers():
+    from dmg_executor.states.holder_turn import ClearForTurn
+
+    run, obs = _slab_to_press(0.0)
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, ClearForTurn), run.campaign.notes
+    assert outcome.to.move.home is None and abs(np.rad2deg(outcome.to.move.angle)) == 90.0
+
+
+def test_a_holder_turned_in_the_pushes_goes_back_first_when_only_a_quarter_turn_from_there_reaches_a_press():
+    """Turned 70 deg about its grasp axis, no quarter turn of gripper 1 from where it is brings the grasp axis the
+    way the pusher's fingers point: it goes back to where it started (from where one does), not leaving the press."""
+    from dmg_executor.states.holder_turn import ClearForTurn
+
+    run, obs = _slab_to_press(70.0)
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, ClearForTurn), run.campaign.notes
+    assert outcome.to.move.home is not None and np.allclose(outcome.to.move.home, run.holder_start)
+    assert not any("no safe push" in note for note in run.campaign.notes)
