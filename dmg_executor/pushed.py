@@ -10,7 +10,7 @@ from dmg_planner.primitives import PrimitiveKind
 
 
 def mark_missed(run: Run, note: str) -> None:
-    """The pusher turned without turning the object: that push is not planned again."""
+    """The pusher turned without turning the object (or tilted it instead): that push is not planned again."""
     if run.pushed is not None:
         run.memory.missed.append(run.pushed.point)
     run.note(note)

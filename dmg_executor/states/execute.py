@@ -180,7 +180,13 @@ class Execute(State):
         tilted = tilt_since(pushed.reference, obs.object_in_holder) if run.fresh(obs) else 0.0
         if (s.monitors.push_tilt_stop * s.slip.angle < tilted <= s.slip.angle
                 and obs.object_tilt_sigma <= s.slip.tilt_sigma):
-            return self._stop(run, obs, f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis")
+            why = f"the object tilted {np.rad2deg(tilted):.1f} deg off the grasp axis"
+            if campaign.primitive.kind == PrimitiveKind.ROTATION:
+                # There the push tilts the object instead of turning it: a rotation has other points to push (sim, a
+                # plus: pushed there again, it tilted on and left the grip as the grip closed).
+                mark_missed(run, f"a push of primitive {campaign.index} stopped: {why}: not pushed there again")
+                return self._tighten(run, obs)
+            return self._stop(run, obs, why)
         if campaign.primitive.kind == PrimitiveKind.TRANSLATION:
             moving = push.sense * push.direction
             along = float(campaign.remaining_motion(obs) @ (holder[:3, :3].T @ moving))
@@ -214,8 +220,10 @@ class Execute(State):
                 swept, seen_turned = known.swept(invert(obs.holder) @ obs.pusher), abs(turned)
             stalled = self._turn_stalled(run, swept, seen_turned)
             missed = self.turn_mark is None and pusher_turned > self.sweep_to_face + s.push.missed_turn
-            if (stalled and seen_turned < s.push.turn_gain) or missed:
-                # No turn to show for it (a stall after a noise 'gain', or none at all): turning in the air.
+            if (stalled and seen_turned < s.push.turn_stall) or missed:
+                # No turn worth the push to show for it (a stall before the object turned as far as the tip may sweep
+                # without it, or none at all): turning in the air, or shoving the object some other way (sim, a plus:
+                # 1.4 deg for 14 deg of sweep; pushed there again it tilted and left the grip).
                 mark_missed(run, f"a rotation push of primitive {campaign.index} missed the object (it turned "
                                  f"{np.rad2deg(turned):.1f} deg): not tried there again")
                 return self._tighten(run, obs)

@@ -136,10 +136,11 @@ def test_a_slip_seen_with_nothing_touching_the_object_is_looked_at_again_once_be
     assert executor.done and executor.result.outcome == Outcome.SLIP, executor.result
 
 
-def _rotation_run(follow: float, give: float, stuck_after_deg: float = np.inf) -> PlanExecutor:
+def _rotation_run(follow: float, give: float, stuck_after_deg: float = np.inf, about=(1.0, 0.0, 0.0)) -> PlanExecutor:
     """A 20 deg rotation of the box on the synthetic cell, to its end. Once the pusher's tip has pressed `give`
     [m] into the box, the box turns about the grasp axis `follow` deg per deg the tip sweeps round it,
-    up to `stuck_after_deg` (then it sticks: the pusher slides on along the face). The camera's images come
+    up to `stuck_after_deg` (then it sticks: the pusher slides on along the face) - or, given another axis
+    `about` (holder frame), about that one instead (it tilts). The camera's images come
     every other tick, each a tick old when it arrives; the arms take up a commanded twist with a lag (a
     pusher closing its gap overruns the face as the push begins)."""
     cell = box_cell()
@@ -163,7 +164,7 @@ def _rotation_run(follow: float, give: float, stuck_after_deg: float = np.inf) -
         touching = surface.inside(apply(invert(cell.object_in_holder), after + (tip_radius + give) * ahead)[None])[0]
         if executor.step == Step.EXECUTE and touching and abs(np.rad2deg(turned)) < stuck_after_deg:
             turn = np.eye(4)
-            turn[:3, :3] = Rotation.from_rotvec([follow * swept, 0.0, 0.0]).as_matrix()
+            turn[:3, :3] = Rotation.from_rotvec(follow * swept * np.asarray(about)).as_matrix()
             cell.object_in_holder = turn @ cell.object_in_holder
             turned = Rotation.from_matrix(cell.object_in_holder[:3, :3] @ start[:3, :3].T).as_rotvec()[0]
     return executor
@@ -183,6 +184,14 @@ def test_a_rotation_push_whose_object_sticks_is_stopped_within_the_stall_sweep()
     stalls = [note for note in executor.notes if "stopped turning with the pusher" in note]
     assert stalls, executor.notes
     assert abs(float(stalls[0].split("stopped after ")[1].split(" deg")[0])) < 5.0 + 2.0, stalls[0]
+
+
+def test_a_rotation_push_that_tilts_the_object_instead_of_turning_it_is_stopped_and_not_pushed_there_again():
+    """(The box here tilts about gripper 1's fingers as far as a turn would have gone.)"""
+    executor = _rotation_run(follow=0.75, give=0.0015, about=(0.0, 0.0, 1.0))
+    tilted = [note for note in executor.notes if "tilted" in note]
+    assert tilted and tilted[0].endswith("not pushed there again"), executor.notes
+    assert executor.run.memory.missed, executor.notes
 
 
 class _Faulty(ReturnHome):
