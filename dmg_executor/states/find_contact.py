@@ -65,9 +65,10 @@ def push_when_returned(run: Run, primitive: Primitive, obs: Observation) -> bool
     """At alpha < 1 the holder moves in the pushes (at 0 it does all of a rotation: turned 45 deg
     about its grasp axis, its hand is where the pusher has to go). Would the pusher, back where it
     started, find a push for `primitive` with the holder back where it started, holding the object
-    as it does now (or with the holder then turning the object's far side towards it, or a quarter
-    turn about its fingers: a level press along the grasp axis is reachable only with that axis the
-    way the pusher's fingers point at home, which a quarter turn of the moved holder misses)?"""
+    as it does now (or with the holder then turning the object's far side towards it, or, for a level
+    press, a quarter turn about its fingers: a press along the grasp axis is reachable only with that
+    axis the way the pusher's fingers point at home, which a quarter turn of the moved holder misses;
+    a translation's quarter turn is tried where the holder stands)?"""
     offset, turned = distance(run.holder_start, obs.holder)
     moved, turns = run.settings.holder, run.holder_turns
     if not turns.may_return or turns.far_side or (offset < moved.moved_distance and turned < moved.moved_turn):
@@ -76,7 +77,8 @@ def push_when_returned(run: Run, primitive: Primitive, obs: Observation) -> bool
     try:
         plan_push(run, primitive, returned)
     except (PushError, RouteError):
-        return push_when_turned(run, primitive, returned) or quarter_turn(run, returned) is not None
+        return (push_when_turned(run, primitive, returned)
+                or (run.campaign.leveling and quarter_turn(run, returned) is not None))
     return True
 
 
