@@ -23,6 +23,7 @@ from dmg_executor.push_points import (
     PushError,
     PushPoint,
     exit_normals,
+    grasp_room,
     reasons,
     rotation_push,
     straddle_push,
@@ -126,8 +127,9 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
             except (PushError, RouteError) as error:
                 problems.append(str(error))
                 continue
-            if candidates:   # first of the best seen: the longest lever beyond the tips
-                return max(candidates, key=lambda candidate: candidate[1])[0]
+            if candidates:   # seen, turning the furthest the grasp allows, then the best seen; first: the longest lever
+                return max(candidates, key=lambda c: (c[1] > 0, round(np.rad2deg(min(c[0].contact.turn_limit,
+                                                                                      abs(limited)))), c[1]))[0]
     raise PushError(reasons(problems))
 
 
@@ -285,9 +287,33 @@ def _rotation_points(run: Run, obs: Observation, directions: np.ndarray, angle: 
                 problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm is too far "
                                 "between the fingers towards the palm")
                 continue
+            push = replace(push, turn_limit=_turn_limit(run, holder_in_object, push, middle))
+            if push.turn_limit < min(abs(angle), s.push.turn_stall):
+                problems.append(f"the push at {np.round(push.point * 1000, 1).tolist()} mm would slide the grasp off "
+                                f"its faces within {np.rad2deg(push.turn_limit):.1f} deg")
+                continue
             # Preferred in this order: beyond the tips, along the fingers, towards the palm; long levers first.
             ranked.append(((1 if along_fingers else 0 if towards_palm < 0 else 2, -depth), push))
     return [push for _, push in sorted(ranked, key=lambda entry: entry[0])]
+
+
+def _turn_limit(run: Run, holder_in_object: np.ndarray, push: PushPoint, middle: np.ndarray) -> float:
+    """How far [rad] a rotation push at `push` may turn the object before the grasp, sliding over it the way the
+    push's force goes (`push.turn_slide` / lever per radian), comes within `push.grasp_margin` of where its
+    faces end (`grasp_room`); inf if it stays on them for the largest turn a push does."""
+    s = run.settings
+    axis = holder_in_object[:3, 0]
+    across = np.cross(axis, push.direction)
+    lever = abs(float((push.point - middle) @ across)) / max(float(np.linalg.norm(across)), 1e-12)
+    if s.push.turn_slide <= 0.0 or lever <= 0.0:
+        return np.inf
+    per_radian = s.push.turn_slide / lever
+    way = -(push.direction - (push.direction @ axis) * axis)      # the object goes with the push, the grasp back
+    reach = per_radian * s.push.max_angle + s.push.grasp_margin
+    step = max(s.push.grasp_margin / 4, 1e-4)      # samples of the slide, finer than the margin kept
+    room = grasp_room(run.surface, holder_in_object[:3, 3], axis, way, reach, step, s.push.grasp_square,
+                      s.push.grasp_margin)
+    return np.inf if room >= reach else max(room - s.push.grasp_margin, 0.0) / per_radian
 
 
 def _square_directions(run: Run, obs: Observation, motion: np.ndarray, holder_in_object: np.ndarray) -> list[np.ndarray]:

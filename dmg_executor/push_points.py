@@ -38,6 +38,7 @@ class PushPoint:
     direction: np.ndarray   # unit direction the pusher moves (and the object with it), object frame
     spread: float = 0.0     # m between the pusher's fingertip centres: 0 = closed (side by side, touching)
     carry: bool = False     # the tips hold the face from below and move away from it: the object follows, let down
+    turn_limit: float = np.inf   # rad a rotation push may turn the object before the grasp slides off its faces
 
 
 class ObjectSurface:
@@ -182,6 +183,32 @@ def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:
     normals = answer["primitive_normals"].numpy().astype(float)
     normals[~np.isfinite(answer["t_hit"].numpy())] = np.nan
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def grasp_room(surface: ObjectSurface, middle, axis, way, reach: float, step: float, square: float,
+               width_change: float) -> float:
+    """How far [m] the grasp's `middle` (object frame) can slide along `way` (across the grasp `axis`), in
+    samples `step` apart up to `reach`, with the grasp still square on its faces: the axis enters and leaves
+    the object on faces within `square` [rad] of square to it, their distance apart within `width_change` of
+    what it is at the middle. The fingers hold the object where the axis enters and leaves it; past where
+    the faces end or step, the grip closes on an edge and turns the object out of it."""
+    axis, way = _unit(axis, "grasp axis"), _unit(way, "slide direction")
+    slides = np.arange(0.0, reach + step / 2, step)
+    centres = np.asarray(middle, float) + slides[:, None] * way
+    far = surface.reach * axis
+    rays = np.vstack([np.column_stack([centres - far, np.broadcast_to(axis, centres.shape)]),
+                      np.column_stack([centres + far, np.broadcast_to(-axis, centres.shape)])])
+    answer = surface.scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))
+    hits = answer["t_hit"].numpy().astype(float).reshape(2, -1)
+    normals = answer["primitive_normals"].numpy().astype(float).reshape(2, -1, 3)
+    facing = np.abs(normals @ axis) / np.maximum(np.linalg.norm(normals, axis=2), 1e-12)
+    widths = 2 * surface.reach - hits.sum(axis=0)
+    held = (np.isfinite(hits).all(axis=0) & (facing >= np.cos(square)).all(axis=0)
+            & (np.abs(widths - widths[0]) <= width_change))
+    if not held[0]:
+        return 0.0
+    lost = np.flatnonzero(~held)
+    return float(slides[lost[0] - 1]) if len(lost) else float(reach)
 
 
 def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,

@@ -64,6 +64,9 @@ class PushSettings:
     max_angle: float               # rad
     turn_stall: float              # rad
     rotation_slide: float
+    turn_slide: float              # m^2
+    grasp_margin: float
+    grasp_square: float            # rad
     blind: bool
     lever_shares: np.ndarray
     off_middle_shares: np.ndarray

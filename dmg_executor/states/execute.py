@@ -208,7 +208,8 @@ class Execute(State):
         else:
             turn = campaign.errors[1]
             turned = turned_since(pushed.reference, obs.object_in_holder)
-            budget = float(np.clip(turn + turned, -s.push.max_angle, s.push.max_angle))   # this push's share
+            most = min(s.push.max_angle, push.contact.turn_limit)     # (as far as the grasp stays on its faces)
+            budget = float(np.clip(turn + turned, -most, most))   # this push's share
             left = budget - turned
             if abs(turn) <= s.tolerances.angle or left * np.sign(budget) <= s.tolerances.angle / 2:
                 return self._tighten(run, obs)

@@ -2,10 +2,15 @@
 bracket: translation, rotation and straddle pushes, exit normals, refusals, and the mesh centroid."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
+from dmg_common.transforms import invert
 from dmg_executor.settings import ExecutorSettings
+from dmg_planner.primitives import Primitive, PrimitiveKind
 from executor_fixtures import box_surface  # noqa: F401
 
 RULES = ExecutorSettings.defaults()     # the shipped rules (config/executor.yaml)
@@ -117,3 +122,71 @@ def test_the_reasons_no_candidate_served_are_each_given_once_with_how_many_it_ru
     assert reasons(["the push line misses the object", "no view", "the push line misses the object"]) == \
         "the push line misses the object (2 candidates); no view"
     assert reasons([]) == ""
+
+
+def _thin_plate():
+    """A 97 x 75 x 10 mm plate (object frame at its centre) with a 8 x 39 x 37 mm stem under it: a T whose
+    plate is held across its 75 mm width (y), on a 10 mm high face."""
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import Box, box_union_mesh
+
+    parts = [Box(np.zeros(3), np.array([0.097, 0.075, 0.010])), Box(np.array([0.0, 0.0, -0.0235]), np.array([0.008, 0.039, 0.037]))]
+    return ObjectSurface(*box_union_mesh(parts), mass=0.09)
+
+
+def test_the_grasp_can_slide_as_far_as_its_faces_go_and_no_further():
+    from dmg_executor.push_points import grasp_room
+
+    plate = _thin_plate()
+    middle, axis = np.array([-0.003, 0.0, 0.0037]), np.array([0.0, 1.0, 0.0])
+    square, width_change, step = np.deg2rad(15.0), 0.002, 2.5e-4
+
+    def room(way, reach=0.02):
+        return grasp_room(plate, middle, axis, np.asarray(way, float), reach, step, square, width_change)
+
+    assert room([0, 0, 1]) == pytest.approx(0.0013, abs=step)      # the plate's top edge, 1.3 mm above
+    assert room([0, 0, -1]) == pytest.approx(0.0087, abs=step)     # its bottom edge (the stem below is narrower)
+    assert room([1, 0, 0]) == pytest.approx(0.02)                  # along the plate: as far as asked
+    assert room([-1, 0, 0], reach=0.06) == pytest.approx(0.0455, abs=step)   # its end
+    # Tilted 20 deg off its faces, the grasp holds nowhere.
+    tilted = np.array([0.0, np.cos(0.35), np.sin(0.35)])
+    assert grasp_room(plate, middle, tilted, np.array([1.0, 0, 0]), 0.01, step, square, width_change) == 0.0
+
+
+def test_a_rotation_push_near_the_edge_of_a_thin_grasped_face_slides_the_grasp_inwards_and_no_further():
+    """The loosened grip, turning, gives way to the push's force too: the object goes with the push, the grasp
+    over it the other way. A 10 x 75 x 60 mm slab held across its 75 mm width, 1.3 mm from its grasped faces'
+    +x edge, is pushed (beyond gripper 1's fingertips or towards its palm, whichever turns it the right way)
+    so that the grasp slides away from that edge; and only as far as keeps it push.grasp_margin inside its
+    faces, held there or at the faces' middle."""
+    from dmg_executor.push_planning import plan_push
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.run import Run
+    from dmg_planner.objects import Box, box_union_mesh
+    from synthetic import SyntheticCell, pose
+
+    slab = ObjectSurface(*box_union_mesh([Box(np.zeros(3), np.array([0.010, 0.075, 0.060]))]), mass=0.05)
+    holder_axes = np.column_stack([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # object frame; palm below
+    for offset, angle in itertools.product((0.0037, 0.0), (40.0, -40.0)):
+        holder_in_object = np.eye(4)
+        holder_in_object[:3, :3], holder_in_object[:3, 3] = holder_axes, [offset, 0.0, 0.0]
+        after = holder_in_object.copy()
+        after[:3, :3] = holder_axes @ Rotation.from_rotvec([np.deg2rad(angle), 0.0, 0.0]).as_matrix()
+        contacts = [holder_in_object[:3, :3] @ [side * 0.0375, 0, 0] + holder_in_object[:3, 3] for side in (-1, 1)]
+        turn = Primitive(PrimitiveKind.ROTATION, np.deg2rad(angle), np.zeros(3), contacts[0], contacts[0], 0.0, 0.0,
+                         contacts[1], contacts[1], after)
+        cell = SyntheticCell(pose([0.55, 0.10, 0.15], [180, 0, 0]), pose([0.51, -0.02, 0.15], [-90, 0, 0]),
+                             invert(holder_in_object), opening=0.075)
+        run = Run(RULES, slab, [turn], 0, 1.0, cell.time, None, None)
+        obs = cell.observe()
+        run.begin(obs)
+        run.last = obs
+        run.campaign.measure(obs)
+        push = plan_push(run, turn, obs).contact
+        lever = abs(np.cross(push.point - holder_in_object[:3, 3], push.direction) @ holder_axes[:, 0])
+        slide = RULES.push.turn_slide / lever * min(push.turn_limit, RULES.push.max_angle)
+        end = holder_in_object[:3, 3] - slide * push.direction        # where the grasp's middle is believed to end
+        assert abs(end[0]) <= 0.005 - RULES.push.grasp_margin + 1e-4, (offset, angle)
+        assert push.turn_limit >= RULES.push.turn_stall
+        if offset:
+            assert push.direction[0] > 0.9, angle        # the grasp slides to -x, away from the near edge
