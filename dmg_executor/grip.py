@@ -53,3 +53,15 @@ def tilt_steering(tilt: np.ndarray, direction: np.ndarray, lever: float, grip_re
     While the object slides, nothing else resists a turn about that axis."""
     axis = np.cross(direction, [1.0, 0.0, 0.0])
     return -math.copysign(1.0, grip_reach - lever) * float(tilt @ axis)
+
+
+def balanced_line(turned: float, torque: float, grip_force: float, friction: float, gain: float,
+                  below: float, above: float) -> float:
+    """Where [m] across the push line from the grasp axis a translation's push runs: a push force F along
+    d at an offset e along d x x turns the object about the grasp axis x with e F. While the loosened grip
+    slides, its friction resists no turn about x (limit surface: the object turns (torque / F) (mu / mu_t)^2
+    rad per metre pushed), so the line runs where e F cancels the weight's `torque` about x [N m], F taken as
+    the two fingers' sliding friction, and `gain` [m/rad] further against the turn `turned` [rad] seen since
+    the push began; kept within [-below, above] (where the face is)."""
+    balance = -torque / max(2.0 * friction * grip_force, 1e-6)
+    return float(np.clip(balance - gain * turned, -below, above))

@@ -154,15 +154,17 @@ class Pilot:
     def stalled(self, obs: Observation, target: np.ndarray | None = None,
                 orientation: np.ndarray | None = None) -> bool:
         """Has the pusher come no closer to `target` (turned to `orientation`, if given; by default the
-        current waypoint, turned as wanted there) for `stall_time`?"""
+        current waypoint, turned as wanted there) for `stall_time`, by `headway_distance` or `headway_turn` or,
+        far from it, by `headway_share` of what was left?"""
         if target is None:
             target, orientation = self.route.waypoints[self.route.index], self.route.orientations[self.route.index]
         offset = float(np.linalg.norm(target - obs.pusher[:3, 3]))
         turn = 0.0 if orientation is None else turn_between(orientation, obs.pusher[:3, :3])
         key = target.tobytes() + (b"" if orientation is None else orientation.tobytes())
         headway, rules = self._headway, self.settings.approach
-        if (headway is None or headway.target != key or offset < headway.offset - rules.headway_distance
-                or turn < headway.turn - rules.headway_turn):
+        if (headway is None or headway.target != key
+                or offset < headway.offset - max(rules.headway_distance, rules.headway_share * headway.offset)
+                or turn < headway.turn - max(rules.headway_turn, rules.headway_share * headway.turn)):
             self._headway = _Headway(key, offset, turn, obs.time)
             return False
         return obs.time - headway.since > self.settings.approach.stall_time

@@ -438,7 +438,18 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     views, seen = views[first:], seen[first:]
     start = meeting_start(start, views[0], direction, object_pose, run.surface, s.gripper.tip_radius, s.push.gap, s.fingertips,
                           push.spread)
-    if push.spread:
+    if not push.spread:
+        # The last stretch runs along the line of the pusher's start, which the tips set beside the push point's
+        # own line; on its way in no other part of the object may come first (sim, a T turned 25 deg: the way in
+        # from the push point's line cut its bar's corner, and the tip knocked the object out of the grip).
+        start_h = apply(to_holder, start)
+        outside_h = start_h - (box.exit_distance(start_h, -direction_h) + s.approach.exit_margin) * direction_h
+        early = float((start - meeting_start(apply(holder, outside_h), views[0], direction, object_pose, run.surface,
+                                             s.gripper.tip_radius, s.push.gap, s.fingertips)) @ direction)
+        if early > s.tolerances.position:
+            raise RouteError(f"on the way in to the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
+                             f"a fingertip would meet the object {early * 1000:.0f} mm before the push start")
+    else:
         outside_h = _straddle_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
                                     invert(obs.object_in_holder))
     pusher_h = apply(to_holder, obs.pusher[:3, 3])

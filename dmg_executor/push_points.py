@@ -211,6 +211,20 @@ def grasp_room(surface: ObjectSurface, middle, axis, way, reach: float, step: fl
     return float(slides[lost[0] - 1]) if len(lost) else float(reach)
 
 
+def face_room(surface: ObjectSurface, point, direction, way, reach: float, step: float) -> float:
+    """How far [m] from `point` on a face, along `way` (across the push `direction`), in samples `step`
+    apart up to `reach`, a push along `direction` still meets the face: the line there meets the object
+    no more than 45 deg of slope nearer or further than at `point` (as `_checked` asks of a push's sides)."""
+    direction, way = _unit(direction, "push direction"), _unit(way, "way across the push")
+    slides = np.arange(step, reach + step / 2, step)
+    back = surface.reach
+    origins = np.asarray(point, float) + slides[:, None] * way - back * direction
+    rays = np.column_stack([origins, np.broadcast_to(direction, origins.shape)]).astype(np.float32)
+    depth = surface.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(float) - back
+    lost = np.flatnonzero(~(np.abs(depth) <= slides))
+    return float(reach) if not len(lost) else float(slides[lost[0] - 1]) if lost[0] else 0.0
+
+
 def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,
                   inset: float, slant_limit: float, edge_margin: float = 0.0) -> PushPoint:
     """Push point for a ROTATION of the finger by `angle` about the outward contact normal n,

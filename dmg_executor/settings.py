@@ -41,6 +41,7 @@ class ApproachSettings:
     exit_margin: float
     headway_distance: float
     headway_turn: float            # rad
+    headway_share: float
     other_views: int
     distinct_view: float           # rad
     view_short: float              # rad
@@ -186,6 +187,8 @@ class SteeringSettings:
 
     gain: float                    # m/s per rad
     speed: float
+    turn_offset: float             # m per rad
+    turn_offset_limit: float
 
 
 @dataclass(frozen=True)

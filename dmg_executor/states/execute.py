@@ -10,9 +10,10 @@ from dmg_common.transforms import apply, invert, turn_between
 from dmg_executor.campaign import slid_since, turned_since
 from dmg_executor.contract import Command, GripCommand, Observation, Step
 from dmg_executor.fingertips import leading_tip, sweep_to_touch
-from dmg_executor.grip import tilt_steering
+from dmg_executor.grip import balanced_line, tilt_steering, weight_torque
 from dmg_executor.monitors import tilt_since, turn_since
 from dmg_executor.motion import carrying_grip, coordinated, held_grip, loosened_grip
+from dmg_executor.push_points import face_room
 from dmg_executor.pushed import mark_missed
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.run import Pushed, Run
@@ -49,6 +50,8 @@ class Execute(State):
         self.carried_from: tuple[np.ndarray, np.ndarray] | None = None   # (pusher, object) positions, holder frame,
         #                                                          when a carry began to let the object down
         self.line_offset = 0.0     # m across the push line from the grasp axis where the touching tip is kept
+        self.turn_seen = 0.0       # rad the object was last seen turned about the grasp axis since the push began
+        self.line_range: tuple[float, float] | None = None   # m a translation's line may move either way across
 
     def enter(self, run: Run, obs: Observation) -> None:
         run.pushed = None
@@ -123,7 +126,7 @@ class Execute(State):
                               turning=campaign.primitive.kind == PrimitiveKind.ROTATION)
         reckoning.moved(obs.time, pusher)
         run.pushed = Pushed(reference, pusher.copy(), along.copy(), push.contact, obs.opening, reckoning)
-        self.turn_mark = None
+        self.turn_mark, self.turn_seen, self.line_range = None, 0.0, None
         # Close the gap along the push line first, at push speed: turning from `gap` away, a rotation's
         # pusher would mostly slide past the face (its arc is tangent to the face, not into it); a
         # translation's P control would take seconds over it. A translation stops `touch_margin`
@@ -202,7 +205,7 @@ class Execute(State):
             across = np.cross(push.direction, holder[:3, 0])
             touching = obs.pusher[:3, 3] + leading_tip(push.direction, obs.pusher[:3, :3], s.gripper.tip_radius,
                                                        s.fingertips.leading_tip)
-            offset = float((touching - holder[:3, 3]) @ across) - self.line_offset
+            offset = float((touching - holder[:3, 3]) @ across) - self._line(run, obs)
             relative = np.concatenate([speed * moving - s.approach.gain * offset * across
                                        + self._tilt_slide(run, obs) * holder[:3, 0], np.zeros(3)])
         else:
@@ -316,6 +319,25 @@ class Execute(State):
             self.turn_mark = (swept, turned)
             return False
         return mark is not None and swept - mark[0] > push.turn_stall
+
+    def _line(self, run: Run, obs: Observation) -> float:
+        """Where [m, across the push line from the grasp axis] a translation's touching tip is kept: where its
+        torque about the grasp axis balances the weight's, steered against the turn seen since the push began
+        (`balanced_line`), within the face; a carry's line stays where it was planned."""
+        s, pushed = run.settings, run.pushed
+        if run.push.carry or run.push_spread:    # (a straddle push's tips are beside gripper 1's fingers)
+            return self.line_offset
+        if run.fresh(obs) and not pushed.reckoning.blind:
+            self.turn_seen = turned_since(pushed.reference, obs.object_in_holder)
+        if self.line_range is None:     # (the tip stays `push.edge_margin` inside the face)
+            across = invert(pushed.reference)[:3, :3] @ np.cross(run.push.local_direction, [1.0, 0.0, 0.0])
+            reach, contact = s.steering.turn_offset_limit + s.push.edge_margin, run.push.contact
+            step = max(s.push.edge_margin / 4, 1e-4)
+            self.line_range = tuple(max(face_room(run.surface, contact.point, contact.direction, side * across, reach,
+                                                  step) - s.push.edge_margin, 0.0) for side in (-1.0, 1.0))
+        torque = weight_torque(obs.object_in_holder, obs.holder[:3, :3], run.surface.centre_of_mass, run.surface.mass)
+        return self.line_offset + balanced_line(self.turn_seen, float(torque[0]), self._pushing_grip(run, obs).max_force,
+                                                s.grip.friction, s.steering.turn_offset, *self.line_range)
 
     @staticmethod
     def _tilt_slide(run: Run, obs: Observation) -> float:

@@ -130,7 +130,8 @@ def _thin_plate():
     from dmg_executor.push_points import ObjectSurface
     from dmg_planner.objects import Box, box_union_mesh
 
-    parts = [Box(np.zeros(3), np.array([0.097, 0.075, 0.010])), Box(np.array([0.0, 0.0, -0.0235]), np.array([0.008, 0.039, 0.037]))]
+    parts = [Box(np.zeros(3), np.array([0.097, 0.075, 0.010])),
+             Box(np.array([0.0, 0.0, -0.0235]), np.array([0.008, 0.039, 0.037]))]
     return ObjectSurface(*box_union_mesh(parts), mass=0.09)
 
 
@@ -159,6 +160,7 @@ def test_a_rotation_push_near_the_edge_of_a_thin_grasped_face_slides_the_grasp_i
     +x edge, is pushed (beyond gripper 1's fingertips or towards its palm, whichever turns it the right way)
     so that the grasp slides away from that edge; and only as far as keeps it push.grasp_margin inside its
     faces, held there or at the faces' middle."""
+
     from dmg_executor.push_planning import plan_push
     from dmg_executor.push_points import ObjectSurface
     from dmg_executor.run import Run

@@ -52,6 +52,24 @@ def test_a_pusher_that_makes_no_headway_gives_the_push_up_and_heads_home():
     assert np.linalg.norm(cell.pusher[:3, 3] - run.pusher_home[:3, 3]) < 0.01
 
 
+def test_a_pusher_creeping_far_short_of_its_view_counts_as_stuck_and_one_turning_to_it_does_not():
+    """Far from where it is going, 1 deg a second of a 100 deg turn is no headway (an arm at its joint limits
+    turning in its null space); 30 deg a second is."""
+    for rate_deg, stuck in ((1.0, True), (30.0, False)):
+        cell, run = planned_translation()
+        pilot = run.pilot
+        target, wanted = run.push.start, run.push.route.orientations[-1]
+        cell.pusher[:3, 3] = target
+        cell.pusher[:3, :3] = Rotation.from_rotvec([0.0, 0.0, np.deg2rad(100.0)]).as_matrix() @ wanted
+        stalled = False
+        for _ in range(int(1.5 * run.settings.approach.stall_time / 0.1)):
+            stalled = stalled or pilot.stalled(cell.observe(), target, wanted)
+            step = Rotation.from_rotvec([0.0, 0.0, -np.deg2rad(rate_deg * 0.1)]).as_matrix()
+            cell.pusher[:3, :3] = step @ cell.pusher[:3, :3]
+            cell.time += 0.1
+        assert stalled == stuck, rate_deg
+
+
 def test_a_pusher_on_the_push_line_whose_wrist_cannot_turn_the_last_degrees_pushes_when_it_sees_the_object():
     cell, run = planned_translation()
     wanted = run.push.route.orientations[-1]

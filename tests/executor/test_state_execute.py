@@ -79,3 +79,31 @@ def test_the_object_forcing_the_fingers_open_stops_the_push():
     command = state.tick(run, cell.observe())
     assert state.phase == Phase.TIGHTEN and command.holder_grip.max_force == run.settings.grip.hold_force
     assert "forced gripper 1's fingers" in run.campaign.notes[-1]
+
+
+def test_a_translation_push_moves_its_line_against_the_turn_it_sees_about_the_grasp_axis():
+    """The box held at its centre of mass: no weight to balance, the line through the grasp's middle, until the
+    object is seen turned about the grasp axis; then the pusher moves across the push, to the side whose torque
+    turns it back."""
+    from scipy.spatial.transform import Rotation
+
+    for turn_deg in (3.0, -3.0):
+        cell, run, state = at_push_start()
+        across = np.cross(run.push.direction, cell.holder[:3, 0])
+        sideways = []
+        for _ in range(400):
+            obs = cell.observe()
+            run.last = obs
+            run.campaign.measure(obs)
+            outcome = state.tick(run, obs)
+            if state.phase == Phase.PUSH:
+                sideways.append(float(outcome.pusher[:3] @ across))
+                if len(sideways) == 5:     # seen turned from here on
+                    turned = np.eye(4)
+                    turned[:3, :3] = Rotation.from_rotvec([np.deg2rad(turn_deg), 0.0, 0.0]).as_matrix()
+                    cell.object_in_holder = turned @ cell.object_in_holder
+                if len(sideways) == 10:
+                    break
+            cell.move(outcome)
+        assert max(abs(v) for v in sideways[:5]) < 1e-6
+        assert np.sign(sideways[-1]) == -np.sign(turn_deg) and abs(sideways[-1]) > 1e-4

@@ -128,3 +128,45 @@ def test_a_holder_turned_in_the_pushes_goes_back_first_when_only_a_quarter_turn_
     assert isinstance(outcome, Transition) and isinstance(outcome.to, ClearForTurn), run.campaign.notes
     assert outcome.to.move.home is not None and np.allclose(outcome.to.move.home, run.holder_start)
     assert not any("no safe push" in note for note in run.campaign.notes)
+
+
+def test_a_push_route_comes_in_along_the_line_of_the_pushers_start():
+    """The last stretch of a push's route runs along the push direction onto the start itself. A T (a 112 x 58 x
+    10 mm bar on a stem) held across its bar and turned about the grasp axis has its rotation pushes' starts set
+    beside the push points' own lines by the fingertips; coming in along a push point's line, the tip would cut
+    across the bar's corner."""
+    from scipy.spatial.transform import Rotation
+
+    from dmg_common.transforms import invert
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_executor.run import Run
+    from dmg_executor.settings import ExecutorSettings
+    from dmg_planner.objects import Box, box_union_mesh
+    from dmg_planner.primitives import Primitive, PrimitiveKind
+    from synthetic import SyntheticCell, pose
+
+    parts = [Box(np.zeros(3), np.array([0.112, 0.058, 0.010])),
+             Box(np.array([0.0, 0.0, -0.026]), np.array([0.014, 0.034, 0.042]))]
+    tee = ObjectSurface(*box_union_mesh(parts), mass=0.09)
+    for turned, angle in ((10.0, 20.0), (25.0, -20.0), (35.0, 40.0)):
+        holder_in_object = np.eye(4)
+        holder_in_object[:3, :3] = np.column_stack([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]) @ \
+            Rotation.from_rotvec([np.deg2rad(turned), 0.0, 0.0]).as_matrix()
+        after = holder_in_object.copy()
+        after[:3, :3] = holder_in_object[:3, :3] @ Rotation.from_rotvec([np.deg2rad(angle), 0.0, 0.0]).as_matrix()
+        contacts = [holder_in_object[:3, :3] @ [side * 0.029, 0, 0] for side in (-1, 1)]
+        turn = Primitive(PrimitiveKind.ROTATION, np.deg2rad(angle), np.zeros(3), contacts[0], contacts[0], 0.0, 0.0,
+                         contacts[1], contacts[1], after)
+        cell = SyntheticCell(pose([0.55, 0.10, 0.15], [180, 0, 0]), pose([0.51, -0.02, 0.15], [-90, 0, 0]),
+                             invert(holder_in_object), opening=0.058)
+        run = Run(ExecutorSettings.defaults(), tee, [turn], 0, 1.0, cell.time, None, None)
+        obs = cell.observe()
+        run.begin(obs)
+        run.last = obs
+        run.campaign.measure(obs)
+        FindContact().tick(run, obs)
+        push = run.push
+        assert push is not None, run.campaign.notes
+        last = push.route.waypoints[-1] - push.route.waypoints[-2]
+        assert np.allclose(push.route.waypoints[-1], push.start)
+        assert float(last @ push.direction) / np.linalg.norm(last) > 1 - 1e-6, (turned, angle)
