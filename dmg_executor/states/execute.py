@@ -325,9 +325,10 @@ class Execute(State):
         torque about the grasp axis balances the weight's, steered against the turn seen since the push began
         (`balanced_line`), within the face; a carry's line stays where it was planned."""
         s, pushed = run.settings, run.pushed
-        if run.push.carry or run.push_spread:    # (a straddle push's tips are beside gripper 1's fingers)
-            return self.line_offset
-        if run.fresh(obs) and not pushed.reckoning.blind:
+        if run.push.carry or run.push_spread or pushed.reckoning.blind or s.steering.turn_offset_limit <= 0.0:
+            return self.line_offset      # (a straddle push's tips are beside gripper 1's fingers; blind, nothing
+            #                              would tell what the line does)
+        if run.fresh(obs):
             self.turn_seen = turned_since(pushed.reference, obs.object_in_holder)
         if self.line_range is None:     # (the tip stays `push.edge_margin` inside the face)
             across = invert(pushed.reference)[:3, :3] @ np.cross(run.push.local_direction, [1.0, 0.0, 0.0])
