@@ -105,6 +105,7 @@ class Run:
     last_step: int = -1
     last_state: str = ""      # logged as it changes
     notes_logged: int = 0
+    robot_stale_since: float | None = None   # wall clock: the first tick that found the robot's poses too old
 
 
 class ExecutorNode(Node):
@@ -340,14 +341,28 @@ class ExecutorNode(Node):
         if run.goal_handle.is_cancel_requested:
             command = executor.cancel()
         elif (age := self.robot_age())[0] > self.settings.monitors.robot_timeout:
-            command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
-                                     f"{age[0]:.2f} s (the oldest: {age[1]}): stopped")
+            command = self.robot_stale(run, *age)
         else:
+            run.robot_stale_since = None
             command = executor.update(self.observation())
             if executor.failure is not None:     # (set once, as the run ends: later ticks do not come here)
                 self.get_logger().error(executor.failure)
         self.finish(run, command)
         self.tick_finished = time.monotonic()
+
+    def robot_stale(self, run: Run, age: float, oldest: str) -> Command:
+        """Too old robot poses: stop the arms, and end the run only if they stay too old for robot_confirm of
+        wall clock. After this process itself stalls, the clock can jump ahead of pose messages still on
+        their way; the ticks that follow take them in."""
+        now = time.monotonic()
+        if run.robot_stale_since is None:
+            run.robot_stale_since = now
+            self.get_logger().warning(f"the robot's poses are {age:.2f} s old (the oldest: {oldest}): the arms stop "
+                                      f"until they come")
+        if now - run.robot_stale_since < self.values["robot_confirm"]:
+            return Command()
+        return run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
+                                  f"{age:.2f} s (the oldest: {oldest}): stopped")
 
     def finish(self, run: Run, command: Command) -> None:
         """Send a tick's command and progress; when the run has ended, stop and hold once more."""
