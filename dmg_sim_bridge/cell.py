@@ -112,6 +112,10 @@ class Cell:
         self.config = config or load_sim_config()
         self.robot = robot or load_robot()
         self._renderer: mujoco.Renderer | None = None
+        # The wrist camera sees what a real one would: no frame markers. (MuJoCo draws sites by default; a
+        # grasp site's 5 mm ball poked through an 8 mm plate beside its tag and pulled the tag's pose 5 deg.)
+        self._camera_sees = mujoco.MjvOption()
+        self._camera_sees.sitegroup[:] = 0
         self._models: dict[str, mujoco.MjModel] = {}
         self.object: ObjectModel | None = None
         self.model: mujoco.MjModel | None = None
@@ -455,7 +459,7 @@ class Cell:
         camera = self.config.camera
         if self._renderer is None:
             self._renderer = mujoco.Renderer(self.model, camera.height, camera.width)
-        self._renderer.update_scene(self.data, camera=camera_name(camera.arm))
+        self._renderer.update_scene(self.data, camera=camera_name(camera.arm), scene_option=self._camera_sees)
         return self._renderer.render()
 
     def close(self) -> None:

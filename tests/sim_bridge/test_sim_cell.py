@@ -291,3 +291,45 @@ def _edited_sim_yaml(tmp_path, edit):
     path = tmp_path / "sim.yaml"
     path.write_text(yaml.safe_dump(document))
     return path
+
+
+THIN_PLATE = """description: A plate 6 mm thick, thinner than a grasp frame's marker ball.
+mesh: mesh.stl
+units: m
+mass: 0.05
+seed_resolution: 0.013
+parts:
+  - {center: [0.0, 0.0, 0.0], size: [0.080, 0.050, 0.006]}
+apriltags:
+  - {id: 580, size: 0.022, position: [0.026, 0.0, 0.003], rpy_deg: [0, 0, 0]}
+"""
+
+
+@pytest.mark.sim
+def test_the_wrist_camera_sees_the_objects_face_at_the_grasp_not_a_frame_marker(tmp_path, monkeypatch):
+    """MuJoCo draws sites by default: the holding gripper's grasp site, a ball between its fingertips, showed
+    through a thin plate's face beside its tag (a real camera sees no frames)."""
+    from dmg_planner.objects import write_mesh
+
+    folder = tmp_path / "thin_plate"
+    folder.mkdir()
+    (folder / "object.yaml").write_text(THIN_PLATE)
+    monkeypatch.setenv("DMG_OBJECTS_DIR", str(tmp_path))
+    write_mesh(load_object("thin_plate"))
+    cell = Cell()
+    try:
+        cell.reset(object_name="thin_plate")
+        image = cell.render().astype(int)
+        intrinsics = cell.config.camera.intrinsic_matrix()
+
+        def pixel(point_in_object):
+            point = invert(cell.camera_pose()) @ cell.object_pose() @ np.append(point_in_object, 1.0)
+            u, v, w = intrinsics @ point[:3]
+            return image[int(round(v / w)), int(round(u / w))]
+
+        grasp = (invert(cell.object_pose()) @ cell.grasp_pose("arm1"))[:3, 3]
+        face = np.array([grasp[0], grasp[1], 0.003])          # the plate's face over the grasp's middle
+        beside = face + [-0.012, 0.0, 0.0]                       # the same face 12 mm away, clear of the tag
+        assert np.abs(pixel(face) - pixel(beside)).max() <= 12, (pixel(face), pixel(beside))
+    finally:
+        cell.close()
