@@ -25,6 +25,7 @@ from dmg_executor.push_points import (
     exit_normals,
     grasp_room,
     reasons,
+    room_step,
     rotation_push,
     straddle_push,
     translation_push,
@@ -310,9 +311,8 @@ def _turn_limit(run: Run, holder_in_object: np.ndarray, push: PushPoint, middle:
     per_radian = s.push.turn_slide / lever
     way = -(push.direction - (push.direction @ axis) * axis)      # the object goes with the push, the grasp back
     reach = per_radian * s.push.max_angle + s.push.grasp_margin
-    step = max(s.push.grasp_margin / 4, 1e-4)      # samples of the slide, finer than the margin kept
-    room = grasp_room(run.surface, holder_in_object[:3, 3], axis, way, reach, step, s.push.grasp_square,
-                      s.push.grasp_margin)
+    room = grasp_room(run.surface, holder_in_object[:3, 3], axis, way, reach, room_step(s.push.grasp_margin),
+                      s.push.grasp_square, s.push.grasp_margin)
     return np.inf if room >= reach else max(room - s.push.grasp_margin, 0.0) / per_radian
 
 

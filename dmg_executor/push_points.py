@@ -205,10 +205,7 @@ def grasp_room(surface: ObjectSurface, middle, axis, way, reach: float, step: fl
     widths = 2 * surface.reach - hits.sum(axis=0)
     held = (np.isfinite(hits).all(axis=0) & (facing >= np.cos(square)).all(axis=0)
             & (np.abs(widths - widths[0]) <= width_change))
-    if not held[0]:
-        return 0.0
-    lost = np.flatnonzero(~held)
-    return float(slides[lost[0] - 1]) if len(lost) else float(reach)
+    return _kept_until(slides, held, reach)
 
 
 def face_room(surface: ObjectSurface, point, direction, way, reach: float, step: float) -> float:
@@ -221,8 +218,19 @@ def face_room(surface: ObjectSurface, point, direction, way, reach: float, step:
     origins = np.asarray(point, float) + slides[:, None] * way - back * direction
     rays = np.column_stack([origins, np.broadcast_to(direction, origins.shape)]).astype(np.float32)
     depth = surface.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(float) - back
-    lost = np.flatnonzero(~(np.abs(depth) <= slides))
+    return _kept_until(slides, np.abs(depth) <= slides, reach)
+
+
+def _kept_until(slides: np.ndarray, kept: np.ndarray, reach: float) -> float:
+    """The last of the `slides` before the first not `kept` (0 if the first is not; `reach` if all are)."""
+    lost = np.flatnonzero(~kept)
     return float(reach) if not len(lost) else float(slides[lost[0] - 1]) if lost[0] else 0.0
+
+
+def room_step(margin: float) -> float:
+    """The spacing [m] of `grasp_room`'s and `face_room`'s samples when `margin` is to be kept inside the room
+    they find: a quarter of it, at least 0.1 mm."""
+    return max(margin / 4, 1e-4)
 
 
 def rotation_push(surface: ObjectSurface, contact, outward_normal, direction, angle: float, depth: float,

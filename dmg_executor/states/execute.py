@@ -13,7 +13,7 @@ from dmg_executor.fingertips import leading_tip, sweep_to_touch
 from dmg_executor.grip import balanced_line, tilt_steering, weight_torque
 from dmg_executor.monitors import tilt_since, turn_since
 from dmg_executor.motion import carrying_grip, coordinated, held_grip, loosened_grip
-from dmg_executor.push_points import face_room
+from dmg_executor.push_points import face_room, room_step
 from dmg_executor.pushed import mark_missed
 from dmg_executor.reckoning import Reckoning
 from dmg_executor.run import Pushed, Run
@@ -333,7 +333,7 @@ class Execute(State):
         if self.line_range is None:     # (the tip stays `push.edge_margin` inside the face)
             across = invert(pushed.reference)[:3, :3] @ np.cross(run.push.local_direction, [1.0, 0.0, 0.0])
             reach, contact = s.steering.turn_offset_limit + s.push.edge_margin, run.push.contact
-            step = max(s.push.edge_margin / 4, 1e-4)
+            step = room_step(s.push.edge_margin)
             self.line_range = tuple(max(face_room(run.surface, contact.point, contact.direction, side * across, reach,
                                                   step) - s.push.edge_margin, 0.0) for side in (-1.0, 1.0))
         torque = weight_torque(obs.object_in_holder, obs.holder[:3, :3], run.surface.centre_of_mass, run.surface.mass)

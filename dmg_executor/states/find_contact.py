@@ -102,9 +102,8 @@ class FindContact(State):
                 campaign.pushes += not campaign.leveling
                 turns.far_side_pushed = True
                 return Command()
-            if last and self._end_uncertain(run):
-                search.sought_certain = search.seeking_certain = search.searching = True
-                return Transition.handover(look.Look())
+            if last and self._may_seek_certain(run, run.settings.slip.position_sigma):
+                return self._seek_certain(run)
             campaign.next_primitive()
             if campaign.over:
                 campaign.add_correction(obs)
@@ -112,6 +111,9 @@ class FindContact(State):
         if campaign.over:
             return (holder_turn.start_holder_turn(run, obs, back=True) if turns.far_side
                     else Transition.handover(leave.ReturnHome()))
+        s = run.settings
+        if run.held.reference is not None and self._may_seek_certain(run, s.tolerances.goal_position):
+            return self._seek_certain(run)     # (a push from it could as well undo what is done)
         primitive = campaign.primitives[campaign.index]
         try:
             push = plan_push(run, primitive, obs)
@@ -119,7 +121,6 @@ class FindContact(State):
             campaign.error_before_push = campaign.error_and_tolerance(obs)[0]
         except (PushError, RouteError) as error:
             return self._no_push(run, obs, primitive, error)
-        s = run.settings
         outside = [p for p in push.route.waypoints if np.any(p < s.limits.workspace_min) or np.any(p > s.limits.workspace_max)]
         if outside:
             return run.abort(Outcome.LIMIT_VIOLATION, f"primitive {campaign.index}: the push needs the pusher at "
@@ -129,11 +130,23 @@ class FindContact(State):
         return Transition(approach.Approach())
 
     @staticmethod
-    def _end_uncertain(run: Run) -> bool:
-        """Is the plan's last primitive (or correction) about to be judged from a held pose too uncertain of its
-        position to tell, with no look for a better one since the last push? (sim, plug: a lone tag seen
-        obliquely at the end, 1.2-3.6 mm sigma, put a grasp 2.5 mm from its goal 2.4-8.1 mm from it.)"""
-        return not run.search.sought_certain and run.held.uncertain
+    def _may_seek_certain(run: Run, sigma: float) -> bool:
+        """Is the held pose more uncertain of its position than `sigma`, with no look for a better one since the
+        last push (and the object's near side towards the pusher)? None (not seen since a blind push) counts as
+        uncertain. Asked before what an uncertain pose would get wrong for good: the plan's end judged (sigma
+        `slip.position_sigma`; sim, plug: a lone tag seen obliquely, 1.2-3.6 mm sigma, put a grasp 2.5 mm from
+        its goal 2.4-8.1 mm from it), a primitive given up as having no push (the same), a push planned from a
+        pose seen (`tolerances.goal_position`; sim, a T: a pose 8 mm off at 4.7 mm sigma had four primitives
+        given up on a grasp 1.2 mm from its goal)."""
+        held = run.held
+        return (not run.search.sought_certain and not run.holder_turns.far_side
+                and (held.reference is None or held.sigma > sigma))
+
+    @staticmethod
+    def _seek_certain(run: Run) -> Transition:
+        search = run.search
+        search.sought_certain = search.seeking_certain = search.searching = True
+        return Transition.handover(look.Look())
 
     @staticmethod
     def _no_push(run: Run, obs: Observation, primitive: Primitive, error: Exception) -> Command | Transition:
@@ -153,6 +166,8 @@ class FindContact(State):
         turn = quarter_turn(run, obs) if primitive.kind == PrimitiveKind.TRANSLATION and not campaign.leveling else None
         if turn is not None:
             return holder_turn.start_holder_turn(run, obs, back=False, angle=turn)
+        if FindContact._may_seek_certain(run, run.settings.slip.position_sigma):
+            return FindContact._seek_certain(run)     # a primitive is given up only on a certain pose
         turns.far_side_pushed = turns.far_side     # (turned, and still no push: turn back)
         # No push can do (the rest of) it: the next primitive aims at its own target from here,
         # and the result says what was left and why.

@@ -24,6 +24,7 @@ def planned(shift=DOWN_THE_FINGERS, cell=None, **overrides):
     cell = cell or box_cell()
     run = box_run([translation(shift)], cell, **{**NO_STRADDLE, **overrides})
     obs = cell.observe()
+    run.held.take(obs)
     run.campaign.measure(obs)
     return cell, run, FindContact().tick(run, obs)
 

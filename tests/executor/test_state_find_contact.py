@@ -1,6 +1,9 @@
 """FindContact (dmg_executor.states.find_contact) on synthetic observations: it plans the push, hands a
-run with no pose over to a look, and the plan's end over to the way home (once the holder has turned back)."""
+run with no pose (or one too uncertain to decide by) over to a look, and the plan's end over to the way
+home (once the holder has turned back)."""
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -69,6 +72,7 @@ def test_a_rotation_no_push_can_do_is_left_with_a_note_naming_it_and_each_reason
     cell = box_cell()
     run = box_run([rotation(20.0)], cell, **{"push.edge_margin": 0.05, "holder.turn_deg": 0.0})
     obs = cell.observe()
+    run.held.take(obs)     # (a certain pose: an uncertain one is looked at again first, below)
     run.campaign.measure(obs)
     outcome = FindContact().tick(run, obs)
     assert not isinstance(outcome, Transition) and run.campaign.index == 1
@@ -170,3 +174,50 @@ def test_a_push_route_comes_in_along_the_line_of_the_pushers_start():
         last = push.route.waypoints[-1] - push.route.waypoints[-2]
         assert np.allclose(push.route.waypoints[-1], push.start)
         assert float(last @ push.direction) / np.linalg.norm(last) > 1 - 1e-6, (turned, angle)
+
+
+def uncertain(obs, sigma: float):
+    """The observation with its pose `sigma` [m] uncertain in position."""
+    return replace(obs, object_covariance=np.diag([sigma**2] * 3 + [1e-6] * 3))
+
+
+def test_a_push_is_not_planned_from_a_pose_too_uncertain_to_tell_the_goal_but_after_a_look_for_a_better_one():
+    cell = box_cell()
+    run = box_run([translation([0.010, 0.0, 0.0])], cell)
+    sigma = 1.5 * run.settings.tolerances.goal_position
+    obs = uncertain(cell.observe(), sigma)
+    run.held.take(obs)
+    run.campaign.measure(obs)
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, Look) and run.push is None
+    assert run.search.seeking_certain and run.search.sought_certain
+    run.search.searching = run.search.seeking_certain = False     # the look found none better
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, Approach) and run.push is not None
+    assert not run.search.sought_certain      # (the next push's end is looked at again)
+
+
+def test_a_primitive_is_given_up_for_want_of_a_push_only_after_a_look_for_a_certain_pose():
+    cell = box_cell()
+    run = box_run([rotation(20.0)], cell, **{"push.edge_margin": 0.05, "holder.turn_deg": 0.0})
+    sigma = 2.0 * run.settings.slip.position_sigma
+    assert sigma < run.settings.tolerances.goal_position      # certain enough to push from, not to give up on
+    obs = uncertain(cell.observe(), sigma)
+    run.held.take(obs)
+    run.campaign.measure(obs)
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, Look) and run.campaign.index == 0
+    run.search.searching = run.search.seeking_certain = False
+    outcome = FindContact().tick(run, obs)
+    assert not isinstance(outcome, Transition) and run.campaign.index == 1
+    assert "no safe push" in run.campaign.notes[0]
+
+
+def test_a_pose_uncertain_within_the_goal_tolerance_is_pushed_from_without_a_look():
+    cell = box_cell()
+    run = box_run([translation([0.010, 0.0, 0.0])], cell)
+    obs = uncertain(cell.observe(), 2.0 * run.settings.slip.position_sigma)
+    run.held.take(obs)
+    run.campaign.measure(obs)
+    outcome = FindContact().tick(run, obs)
+    assert isinstance(outcome, Transition) and isinstance(outcome.to, Approach) and not run.search.sought_certain
