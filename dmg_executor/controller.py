@@ -176,8 +176,8 @@ class PlanExecutor:
             known = run.pushed.reckoning
             known.moved(obs.time, invert(obs.holder) @ obs.pusher)
             if fresh and obs.object_position_sigma <= s.tolerances.goal_position:
-                # (a pose less certain than the goal's tolerance is no better than the reckoning: sim, a T
-                # pushed beside its tags, poses 10 mm and 45 deg off at 5-7 mm sigma)
+                # (a pose less certain than the goal's tolerance is no better than the reckoning: a lone tag
+                # seen obliquely can be 10 mm off at 4 mm sigma)
                 known.seen(obs.object_in_holder, obs.object_time)
         if self.state.pushing and s.push.blind:
             # The last pose moved on by the pusher's motion since its image: the image's latency made

@@ -113,7 +113,7 @@ class FindContact(State):
                     else Transition.handover(leave.ReturnHome()))
         s = run.settings
         if run.held.reference is not None and self._may_seek_certain(run, s.tolerances.goal_position):
-            return self._seek_certain(run)     # (a push from it could as well undo what is done)
+            return self._seek_certain(run)
         primitive = campaign.primitives[campaign.index]
         try:
             push = plan_push(run, primitive, obs)
@@ -136,8 +136,8 @@ class FindContact(State):
         uncertain. Asked before what an uncertain pose would get wrong for good: the plan's end judged (sigma
         `slip.position_sigma`; sim, plug: a lone tag seen obliquely, 1.2-3.6 mm sigma, put a grasp 2.5 mm from
         its goal 2.4-8.1 mm from it), a primitive given up as having no push (the same), a push planned from a
-        pose seen (`tolerances.goal_position`; sim, a T: a pose 8 mm off at 4.7 mm sigma had four primitives
-        given up on a grasp 1.2 mm from its goal)."""
+        pose seen (`tolerances.goal_position`: a pose less certain than the goal's tolerance cannot tell a push
+        that helps from one that undoes what is done)."""
         held = run.held
         return (not run.search.sought_certain and not run.holder_turns.far_side
                 and (held.reference is None or held.sigma > sigma))
