@@ -10,7 +10,7 @@ certain poses are evidence that the object moved or tilted.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -22,6 +22,14 @@ from dmg_executor.contract import Observation
 def mean_pose(poses: np.ndarray) -> np.ndarray:
     """The mean of (n, 4, 4) poses of one still object: mean rotation, mean position."""
     return from_rotation(Rotation.from_matrix(poses[:, :3, :3]).mean().as_matrix(), poses[:, :3, 3].mean(axis=0))
+
+
+def mean_covariance(covariances: list[np.ndarray | None]) -> np.ndarray | None:
+    """The covariance of the mean of poses with these covariances, their errors independent (sum / n^2);
+    None (taken as certain) if any is."""
+    if not covariances or any(c is None for c in covariances):
+        return None
+    return np.sum(covariances, axis=0) / len(covariances) ** 2
 
 
 @dataclass
@@ -46,20 +54,25 @@ class HeldPose:
     reference: np.ndarray | None = None   # object in the holder's frame, or None (pushing, or not seen since)
     sigma: float = 0.0                    # m, position uncertainty of the pose it was taken from
     poses: list[np.ndarray] = field(default_factory=list)   # the certain poses averaged into it
+    covariances: list[np.ndarray | None] = field(default_factory=list)   # theirs
+    covariance: np.ndarray | None = None  # 6x6 of the reference (of the mean when it averages several)
     pose_time: float = -math.inf          # when the last of them was seen
     pending: bool = False                 # the grip closed on an object not seen since: take the next fresh pose
 
     def take(self, obs: Observation) -> None:
         """Take this pose as the one the closed grip must keep."""
         self.reference, self.sigma = obs.object_in_holder.copy(), obs.object_position_sigma
+        self.covariance = None if obs.object_covariance is None else np.array(obs.object_covariance, float)
         self.poses = [self.reference] if self.trust.certain(obs) else []
+        self.covariances = [self.covariance] if self.poses else []
         self.pose_time = obs.object_time
         self.pending = False
 
-    def take_mean(self, poses: np.ndarray, sigma: float, seen: float) -> None:
+    def take_mean(self, poses: np.ndarray, sigma: float, seen: float, covariance: np.ndarray | None) -> None:
         """Take the mean of several poses of the still object (seen from different views) as the reference."""
         self.reference = mean_pose(poses)
         self.sigma, self.poses, self.pose_time = sigma, [self.reference], seen
+        self.covariance, self.covariances = covariance, [covariance]
 
     def await_fresh(self) -> None:
         """No reference until the next fresh pose: the grip closed on an object not seen since it moved."""
@@ -72,8 +85,10 @@ class HeldPose:
                 or obs.object_time <= self.pose_time or not self.trust.certain(obs)):
             return
         self.poses.append(obs.object_in_holder.copy())
+        self.covariances.append(None if obs.object_covariance is None else np.array(obs.object_covariance, float))
         self.pose_time = obs.object_time
         self.reference = mean_pose(np.array(self.poses))
+        self.covariance = mean_covariance(self.covariances)
 
     @property
     def uncertain(self) -> bool:
@@ -93,3 +108,10 @@ class HeldPose:
         limit = self.trust.position_sigma
         return (self.reference is not None and self.sigma <= limit
                 and (obs.object_position_sigma > limit or len(self.poses) > 1))
+
+    def account(self, obs: Observation) -> Observation:
+        """The pose to judge by: the reference, with its own certainty, where it is the better account
+        (a tilt read from an uncertain image must not stand in for a certain one), else this pose."""
+        if not self.better_than(obs):
+            return obs
+        return replace(obs, object_in_holder=self.reference, object_covariance=self.covariance)

@@ -208,8 +208,8 @@ class PlanExecutor:
             held.fold_in(obs)
         if run.reckoned is not None:
             obs = replace(obs, object_in_holder=run.reckoned)    # pushed, not seen since: where it went
-        elif held.better_than(obs):
-            obs = replace(obs, object_in_holder=held.reference)   # held still since a certain pose
+        else:
+            obs = held.account(obs)                                   # held still since a certain pose
         if obs.time - run.step_started > s.limits.step_timeout:
             return run.abort(Outcome.STEP_TIMEOUT, f"{step.name} of primitive {campaign.index} did not finish in "
                              f"{s.limits.step_timeout:.1f} s (contact error {campaign.errors[0] * 1000:.1f} mm, angle error "

@@ -42,6 +42,7 @@ from dmg_common.ros.waiting import wait_until
 from dmg_common.transforms import invert
 from dmg_executor.contract import Command, Observation, Outcome, Result
 from dmg_executor.controller import PlanExecutor
+from dmg_executor.monitors import Persisting
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.settings import ExecutorSettings
 from dmg_executor.views import CameraModel, TagLayout
@@ -101,11 +102,11 @@ class Run:
     executor: PlanExecutor
     object_id: str
     done: Future            # set by the tick (or the watchdog) that ends the run
+    robot_stale: Persisting  # the robot's poses too old (wall clock), ended ROBOT_LOST once it persists
     last_feedback: float = -math.inf
     last_step: int = -1
     last_state: str = ""      # logged as it changes
     notes_logged: int = 0
-    robot_stale_since: float | None = None   # wall clock: the first tick that found the robot's poses too old
 
 
 class ExecutorNode(Node):
@@ -188,7 +189,7 @@ class ExecutorNode(Node):
             self.get_logger().error(f"goal refused ({error.outcome.name}): {error}")
             goal_handle.abort()
             return self.result(Result(error.outcome, str(error), 0, math.nan, math.nan, 0.0))
-        run = Run(goal_handle, executor, object_id, Future())
+        run = Run(goal_handle, executor, object_id, Future(), Persisting(self.values["robot_confirm"]))
         self.run = run
         self.get_logger().info(f"executing {len(executor.primitives)} primitives on '{object_id}' "
                                f"(alpha {executor.alpha:g})")
@@ -338,31 +339,24 @@ class ExecutorNode(Node):
         if run is None or run.executor.done:
             return
         executor = run.executor
+        age, oldest = self.robot_age()
+        stale, now = age > self.settings.monitors.robot_timeout, time.monotonic()
         if run.goal_handle.is_cancel_requested:
             command = executor.cancel()
-        elif (age := self.robot_age())[0] > self.settings.monitors.robot_timeout:
-            command = self.robot_stale(run, *age)
+        elif run.robot_stale.holds(stale, now):
+            command = executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
+                                     f"{age:.2f} s (the oldest: {oldest}): stopped")
+        elif stale:       # (the arms stop until the poses come, or robot_confirm has passed)
+            if run.robot_stale.since == now:
+                self.get_logger().warning(f"the robot's poses are {age:.2f} s old (the oldest: {oldest}): the arms "
+                                          f"stop until they come")
+            command = Command()
         else:
-            run.robot_stale_since = None
             command = executor.update(self.observation())
             if executor.failure is not None:     # (set once, as the run ends: later ticks do not come here)
                 self.get_logger().error(executor.failure)
         self.finish(run, command)
         self.tick_finished = time.monotonic()
-
-    def robot_stale(self, run: Run, age: float, oldest: str) -> Command:
-        """Too old robot poses: stop the arms, and end the run only if they stay too old for robot_confirm of
-        wall clock. After this process itself stalls, the clock can jump ahead of pose messages still on
-        their way; the ticks that follow take them in."""
-        now = time.monotonic()
-        if run.robot_stale_since is None:
-            run.robot_stale_since = now
-            self.get_logger().warning(f"the robot's poses are {age:.2f} s old (the oldest: {oldest}): the arms stop "
-                                      f"until they come")
-        if now - run.robot_stale_since < self.values["robot_confirm"]:
-            return Command()
-        return run.executor.abort(Outcome.ROBOT_LOST, f"no gripper poses or gripper state from the robot for "
-                                  f"{age:.2f} s (the oldest: {oldest}): stopped")
 
     def finish(self, run: Run, command: Command) -> None:
         """Send a tick's command and progress; when the run has ended, stop and hold once more."""

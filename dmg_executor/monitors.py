@@ -91,3 +91,26 @@ class SlipStreak:
             self.pose_time = obs.object_time
             self.poses.append(obs.object_in_holder.copy())
         return len(self.poses)
+
+
+@dataclass
+class Persisting:
+    """A condition that counts only once it has held for `window` seconds without a break (a robot's
+    poses found too old: after this process itself stalls, the clock can jump ahead of pose messages
+    still on their way, and the next ticks take them in)."""
+
+    window: float
+    since: float | None = None   # when it began to hold
+
+    def holds(self, condition: bool, now: float) -> bool:
+        """Take this tick's condition; has it now held for the whole window?"""
+        if not condition:
+            self.since = None
+            return False
+        if self.since is None:
+            self.since = now
+        return now - self.since >= self.window
+
+    @property
+    def began(self) -> bool:
+        return self.since is not None

@@ -6,6 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_common.transforms import apply, invert, turn_between
+from dmg_executor.belief import mean_covariance
 from dmg_executor.contract import Command, Observation, Outcome, Step
 from dmg_executor.routes import RouteError
 from dmg_executor.run import Run
@@ -70,7 +71,7 @@ class Look(State):
         self.gone_to = 0                         # vantage places gone to
         self.since: float | None = None          # when the pusher settled in the current view
         self.travelling = False                  # on the way to `place`
-        self.poses: list[tuple[np.ndarray, float]] = []   # (pose, m sigma) last seen from each view
+        self.poses: list[tuple[np.ndarray, float, np.ndarray | None]] = []   # (pose, m sigma, covariance) from each view
 
     def tick(self, run: Run, obs: Observation) -> Command | Transition:
         s, search = run.settings, run.search
@@ -118,14 +119,14 @@ class Look(State):
         seen = run.last
         if not run.seen_since(self.since):
             return False
-        self.poses.append((seen.object_in_holder.copy(), seen.object_position_sigma))
+        self.poses.append((seen.object_in_holder.copy(), seen.object_position_sigma, seen.object_covariance))
         # (views from one place see much alike: no more than a few count)
         taken = self.poses[-run.settings.look.view_poses:]
-        poses = np.array([pose for pose, _ in taken])
-        sigma = float(np.linalg.norm([sigma for _, sigma in taken])) / len(poses)
+        poses = np.array([pose for pose, _, _ in taken])
+        sigma = float(np.linalg.norm([sigma for _, sigma, _ in taken])) / len(poses)
         if len(poses) < 2 or sigma > run.settings.slip.position_sigma:
             return False
-        run.held.take_mean(poses, sigma, seen.object_time)
+        run.held.take_mean(poses, sigma, seen.object_time, mean_covariance([covariance for _, _, covariance in taken]))
         run.search.searching = run.search.seeking_certain = False
         run.note(f"primitive {run.campaign.index} judged from the mean of {len(poses)} poses seen from as many "
                  f"views ({sigma * 1000:.1f} mm)")

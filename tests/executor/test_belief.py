@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dmg_common.transforms import distance, from_rotation
-from dmg_executor.belief import HeldPose, PoseTrust, mean_pose
+from dmg_executor.belief import HeldPose, PoseTrust, mean_covariance, mean_pose
 from dmg_executor.contract import Observation
 
 TRUST = PoseTrust(position_sigma=0.001, tilt_sigma=np.deg2rad(2.0), reference_poses=3)
@@ -74,3 +74,24 @@ def test_the_mean_pose_averages_rotations_and_positions():
     poses = np.array([seen(0.0, x=0.001, turn_deg=-4.0).object_in_holder, seen(0.0, x=0.003, turn_deg=4.0).object_in_holder])
     moved, turned = distance(mean_pose(poses), seen(0.0, x=0.002).object_in_holder)
     assert moved < 1e-9 and turned < 1e-9
+
+
+def test_the_reference_standing_in_for_an_uncertain_pose_brings_its_own_certainty():
+    held = HeldPose(TRUST)
+    held.take(seen(0.0, tilt_sigma_deg=0.5))
+    blurred = seen(0.1, x=0.004, sigma=0.003, tilt_sigma_deg=6.0)     # a lone tag seen obliquely
+    judged = held.account(blurred)
+    assert np.allclose(judged.object_in_holder, held.reference)
+    assert abs(np.rad2deg(judged.object_tilt_sigma) - 0.5) < 1e-6 and judged.object_position_sigma < 0.0003
+    assert held.account(seen(0.2, x=0.001)).object_in_holder[0, 3] == 0.001   # as certain as the reference: its own
+
+
+def test_the_covariance_of_a_mean_shrinks_with_the_poses_it_averages():
+    held = HeldPose(TRUST)
+    held.take(seen(0.0))
+    for t in (0.1, 0.2):
+        held.fold_in(seen(t))
+    single = seen(0.0).object_covariance
+    assert np.allclose(held.covariance, single / 3)
+    assert np.allclose(mean_covariance([single, 3 * single]), single)
+    assert mean_covariance([single, None]) is None and mean_covariance([]) is None

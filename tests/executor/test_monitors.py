@@ -9,6 +9,7 @@ from dmg_common.transforms import from_rotation
 from dmg_executor.belief import HeldPose, PoseTrust
 from dmg_executor.contract import Observation
 from dmg_executor.monitors import (
+    Persisting,
     SlipStreak,
     limit_violation,
     moved_in_grip,
@@ -86,3 +87,13 @@ def test_a_streak_counts_each_image_once_and_poses_agree_within_the_slip_limits(
     near = [seen(t, x=0.0005 * i).object_in_holder for i, t in enumerate((0.1, 0.2, 0.3))]
     assert poses_agree(near, S)
     assert not poses_agree([*near, seen(0.4, x=S.slip.distance * 2).object_in_holder], S)
+
+
+def test_a_persisting_condition_counts_once_it_held_its_whole_window_and_a_break_starts_it_again():
+    stale = Persisting(window=0.25)
+    assert not stale.holds(True, 10.0) and stale.began
+    assert not stale.holds(True, 10.2)
+    assert not stale.holds(False, 10.3) and not stale.began       # the poses came: the count starts over
+    assert not stale.holds(True, 10.4) and not stale.holds(True, 10.6)
+    assert stale.holds(True, 10.65)
+    assert Persisting(window=0.0).holds(True, 0.0)
