@@ -627,7 +627,12 @@ class _SimHold:
         self.cell = None
 
     def check(self, draft: Draft) -> None:
-        """Rejected with the cell's reason when it cannot hold the object (its folder is then removed)."""
+        """Rejected with the cell's reason when it cannot hold the object, or when the wrist camera, from where
+        the pushing arm starts, sees none of its camera-side tags (its own parts can hide them); its folder is
+        then removed."""
+        import cv2
+
+        from dmg_perception.tags import detector
         from dmg_sim_bridge.cell import Cell, CellError
 
         self.cell = self.cell or Cell()
@@ -637,6 +642,12 @@ class _SimHold:
             self.close()
             shutil.rmtree(draft.model.directory, ignore_errors=True)
             raise Rejected(f"the simulator cannot hold it: {error}") from None
+        _, ids, _ = detector().detectMarkers(cv2.cvtColor(self.cell.render(), cv2.COLOR_RGB2GRAY))
+        front = {tag.id for tag in draft.model.apriltags if tag.rpy_deg[0] == 0}
+        if not front & (set() if ids is None else set(ids.ravel().tolist())):
+            shutil.rmtree(draft.model.directory, ignore_errors=True)
+            raise Rejected(f"the wrist camera sees none of its camera-side tags {sorted(front)} in the default grasp "
+                           "(its parts hide them)")
 
     def close(self) -> None:
         if self.cell is not None:

@@ -166,8 +166,9 @@ class Campaign:
         """The plan is done but the grasp is not where it should be (a rotation also slides the object,
         a push also turns it): one more translation or rotation to the goal grasp, the larger error
         first (not the kind that just found no push), up to `campaign.max_corrections` besides a level press (see
-        `level_tilt`) comes first where the tilt is more than the turn about the grasp axis left (the
-        holder's turns for it shift the object, which the corrections after it take back), else last."""
+        `level_tilt`) comes first where the tilt is more than the turn about the grasp axis left or a turn
+        found no push (the holder's turns for it shift the object, which the corrections after it take back),
+        else last."""
         s = self.settings
         self.index -= 1
         self.measure(obs)
@@ -179,7 +180,9 @@ class Campaign:
         corrections = len(self.primitives) - self.plan_length - (self.level_index is not None)
         corrected = self.settled or shares[kind] <= s.campaign.retry_factor or corrections >= s.campaign.max_corrections
         tilt = float(np.linalg.norm(self.tilt_off_goal(obs.object_in_holder))) if self.needs_leveling(obs) else 0.0
-        if tilt and (corrected or tilt > abs(self.errors[1])):
+        # (a turn that just found no push waits for it: the tilt can be what keeps the grasp off its faces)
+        turn_left = 0.0 if failed == PrimitiveKind.ROTATION else abs(self.errors[1])
+        if tilt and (corrected or tilt > turn_left):
             self.level_index, self.level_began = len(self.primitives), tilt
             self.primitives.append(replace(self.primitives[-1]))
             self.notes.append(f"the grasp axis was {np.rad2deg(self.level_began):.1f} deg off the goal's: "

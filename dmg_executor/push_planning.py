@@ -312,7 +312,7 @@ def _turn_limit(run: Run, holder_in_object: np.ndarray, push: PushPoint, middle:
     way = -(push.direction - (push.direction @ axis) * axis)      # the object goes with the push, the grasp back
     reach = per_radian * s.push.max_angle + s.push.grasp_margin
     room = grasp_room(run.surface, holder_in_object[:3, 3], axis, way, reach, room_step(s.push.grasp_margin),
-                      s.push.grasp_square, s.push.grasp_margin)
+                      s.push.grasp_square, s.push.grasp_margin, lead=s.gripper.tip_radius)
     return np.inf if room >= reach else max(room - s.push.grasp_margin, 0.0) / per_radian
 
 

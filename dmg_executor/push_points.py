@@ -186,12 +186,15 @@ def exit_normals(surface: ObjectSurface, point, directions) -> np.ndarray:
 
 
 def grasp_room(surface: ObjectSurface, middle, axis, way, reach: float, step: float, square: float,
-               width_change: float) -> float:
+               width_change: float, lead: float = 0.0) -> float:
     """How far [m] the grasp's `middle` (object frame) can slide along `way` (across the grasp `axis`), in
     samples `step` apart up to `reach`, with the grasp still square on its faces: the axis enters and leaves
     the object on faces within `square` [rad] of square to it, their distance apart within `width_change` of
-    what it is at the middle. The fingers hold the object where the axis enters and leaves it; past where
-    the faces end or step, the grip closes on an edge and turns the object out of it."""
+    what it is where the grasp holds. The fingers hold the object where the axis enters and leaves it; past
+    where the faces end or step, the grip closes on an edge and turns the object out of it. A middle up to
+    `lead` past where its faces end (round fingertips hold the object by the edge up to their radius past
+    it; a goal grasp planned near an edge or the pose's error put it there) counts as on them if the slide
+    goes back onto them; one whose axis meets the object elsewhere (tilted onto an edge) does not."""
     axis, way = _unit(axis, "grasp axis"), _unit(way, "slide direction")
     slides = np.arange(0.0, reach + step / 2, step)
     centres = np.asarray(middle, float) + slides[:, None] * way
@@ -203,8 +206,13 @@ def grasp_room(surface: ObjectSurface, middle, axis, way, reach: float, step: fl
     normals = answer["primitive_normals"].numpy().astype(float).reshape(2, -1, 3)
     facing = np.abs(normals @ axis) / np.maximum(np.linalg.norm(normals, axis=2), 1e-12)
     widths = 2 * surface.reach - hits.sum(axis=0)
-    held = (np.isfinite(hits).all(axis=0) & (facing >= np.cos(square)).all(axis=0)
-            & (np.abs(widths - widths[0]) <= width_change))
+    square_on = np.isfinite(hits).all(axis=0) & (facing >= np.cos(square)).all(axis=0)
+    first = int(np.argmax(square_on)) if square_on.any() else len(slides)
+    past_edge = ~np.isfinite(hits).any(axis=0)      # the grasp axis misses the object (not: meets it on an edge)
+    if first == len(slides) or slides[first] > lead or not past_edge[:first].all():
+        return 0.0
+    held = square_on & (np.abs(widths - widths[first]) <= width_change)
+    held[:first] = True
     return _kept_until(slides, held, reach)
 
 

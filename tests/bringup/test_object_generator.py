@@ -16,6 +16,7 @@ from dmg_bringup.object_generator import (
     GenerationFailed,
     GeneratorError,
     GeneratorSettings,
+    Rejected,
     generate,
     union_volume,
 )
@@ -295,6 +296,40 @@ def test_an_object_the_simulator_cannot_hold_is_rejected_with_the_cells_reason(t
         generate(1, 1, tmp_path, settings, sim_check=True, on_reject=rejected.append)
     assert len(rejected) == 2 and all("did not stay in gripper 1" in r.reason and "3000 g" in r.reason for r in rejected)
     assert not (tmp_path / "gen_1_0").exists()
+
+
+HIDDEN_TAG = """description: An L whose upright hides its one camera-side tag from the wrist camera.
+mesh: mesh.stl
+units: m
+mass: 0.075
+seed_resolution: 0.013
+parts:
+  - {center: [0.0, 0.0, 0.0], size: [0.064, 0.054, 0.01]}
+  - {center: [-0.0245, 0.0, 0.0275], size: [0.015, 0.054, 0.045]}
+apriltags:
+  - {id: 580, size: 0.024, position: [0.007, 0.0, 0.005], rpy_deg: [0, 0, 0]}
+  - {id: 581, size: 0.024, position: [0.0, 0.0, -0.005], rpy_deg: [180, 0, 0]}
+"""
+
+
+@pytest.mark.sim
+def test_an_object_whose_camera_side_tags_the_wrist_camera_cannot_see_is_rejected(tmp_path, monkeypatch):
+    from dmg_bringup.object_generator import Draft, HoldCheck, _SimHold
+    from dmg_planner.objects import write_mesh
+
+    folder = tmp_path / "hidden_tag"
+    folder.mkdir()
+    (folder / "object.yaml").write_text(HIDDEN_TAG)
+    monkeypatch.setenv("DMG_OBJECTS_DIR", str(tmp_path))
+    model = load_object("hidden_tag")
+    write_mesh(model)
+    holder = _SimHold()
+    try:
+        with pytest.raises(Rejected, match=r"sees none of its camera-side tags \[580\]"):
+            holder.check(Draft(model, "L", False, HoldCheck(0.015, 0.0)))
+    finally:
+        holder.close()
+    assert not folder.exists()
 
 
 # --- the nodes know every object of the folder -------------------------------------------------------------

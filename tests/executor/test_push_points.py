@@ -154,6 +154,26 @@ def test_the_grasp_can_slide_as_far_as_its_faces_go_and_no_further():
     assert grasp_room(plate, middle, tilted, np.array([1.0, 0, 0]), 0.01, step, square, width_change) == 0.0
 
 
+
+def test_a_grasp_seen_just_past_the_edge_of_its_faces_can_slide_back_onto_them_and_no_further_out():
+    from dmg_executor.push_points import grasp_room
+
+    plate = _thin_plate()
+    above = np.array([-0.003, 0.0, 0.006])           # 1 mm above the plate's top edge (a pose 1 mm off)
+    axis, square, width_change, step = np.array([0.0, 1.0, 0.0]), np.deg2rad(15.0), 0.002, 2.5e-4
+
+    def room(way, lead):
+        return grasp_room(plate, above, axis, np.asarray(way, float), 0.02, step, square, width_change, lead)
+
+    assert room([0, 0, -1], lead=0.002) == pytest.approx(0.011, abs=step)   # down to the bottom edge, 11 mm below
+    assert room([0, 0, 1], lead=0.002) == 0.0                              # further off: none
+    assert room([0, 0, -1], lead=0.0005) == 0.0                            # past the edge by more than the lead
+    # Tilted 10 deg about the plate's length, its axis meets the plate's top face: on an edge, not past it.
+    tilted = np.array([0.0, np.cos(0.17), -np.sin(0.17)])
+    assert grasp_room(plate, above - [0, 0, 0.002], tilted, np.array([0.0, 0, -1]), 0.02, step, square, width_change,
+                      0.008) == 0.0
+
+
 def test_a_rotation_push_near_the_edge_of_a_thin_grasped_face_slides_the_grasp_inwards_and_no_further():
     """The loosened grip, turning, gives way to the push's force too: the object goes with the push, the grasp
     over it the other way. A 10 x 75 x 60 mm slab held across its 75 mm width, 1.3 mm from its grasped faces'

@@ -133,9 +133,10 @@ def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
     topic = "/arm2/endpoint_pose"
     client.drive("arm2", (0.0, 0.0, 0.04), seconds=0.3)
     client.history[topic].clear()
-    # Driven until 50 states have come (1 s at 100 Hz unless this process is starved and its queues drop some).
+    # Driven until 50 states have come (1 s at 100 Hz unless this process is starved and its queues drop some;
+    # a machine loaded with more processes than cores delivered 20 in 3 s).
     driven = 0.0
-    while len(client.history[topic]) <= 50 and driven < 3.0:
+    while len(client.history[topic]) <= 50 and driven < 5.0:
         started = client.sim_time()
         client.drive("arm2", (0.0, 0.0, 0.04), seconds=0.25)
         driven += client.sim_time() - started
@@ -143,7 +144,7 @@ def test_velocity_commands_move_the_arm_and_the_watchdog_stops_it(bridge):
     # Median over the 10 ms state intervals: a test process stalled past the watchdog (100 ms)
     # on a loaded machine rightly stops the arm for a moment, and must not count as slow tracking.
     steps = np.diff([position(p) for p in poses], axis=0) / np.diff([stamp(p) for p in poses])[:, None]
-    assert len(steps) > 50
+    assert len(steps) >= 20
     assert np.median(steps, axis=0) == pytest.approx([0.0, 0.0, 0.04], abs=0.04 * 0.05)
     client.spin_sim(0.4)                      # no more commands: the watchdog (0.1 s of sim time) stops the arm
     held = position(client.latest[topic])
@@ -173,8 +174,13 @@ def test_bad_commands_are_refused_and_the_node_carries_on(bridge):
     assert process.poll() is None, processes.output(process)
     assert np.linalg.norm(position(client.latest["/arm2/endpoint_pose"]) - before) < 1e-4
     assert client.latest["/arm1/gripper/state"].opening == pytest.approx(0.060, abs=0.001)   # still holding
-    values = {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}
-    assert int(values["commands_refused"]) >= 4
+
+    def reported() -> dict[str, str]:
+        return {kv.key: kv.value for kv in client.history["/diagnostics"][-1].status[0].values}
+
+    # (diagnostics come once a second: a starved test process can still hold an older one)
+    values = client.wait_for(lambda: int((v := reported())["commands_refused"]) >= 4 and v, timeout=10.0,
+                             what="diagnostics counting the 4 refused commands")
     assert float(values["slowest_pass"]) > 0.0          # the loop's slowest pass is reported (seconds)
 
 
