@@ -30,7 +30,14 @@ import numpy as np
 
 from dmg_common.transforms import apply, invert
 from dmg_executor.contract import Command, GripCommand, Observation, Outcome, Progress, Result, Step
-from dmg_executor.monitors import SlipStreak, limit_violation, moved_in_grip, poses_agree, tilted_while_pushed
+from dmg_executor.monitors import (
+    SlipStreak,
+    limit_violation,
+    moved_in_grip,
+    poses_agree,
+    tilted_further_while_pressed,
+    tilted_while_pushed,
+)
 from dmg_executor.motion import held_grip
 from dmg_executor.push_points import ObjectSurface
 from dmg_executor.pushed import judge_blind_push
@@ -287,11 +294,16 @@ class PlanExecutor:
 
     def _slip_in(self, obs: Observation) -> tuple[Outcome, str] | None:
         """What the latest pose shows: the object moved in the closed grip (by a pose certain enough of
-        its position), or tilted while pushed (by a pose certain enough of its tilt; once the grip has
-        closed again, only the first kind counts: a pose a few mm off may still be sure of its tilt)."""
+        its position), or tilted while pushed (by a pose certain enough of its tilt; a level press: further off the
+        goal's grasp axis; once the grip has closed again, only the first kind counts: a pose a few mm off may
+        still be sure of its tilt)."""
         run = self.run
         if run.held.reference is not None:
             why = moved_in_grip(obs, run.held, self.settings)
+        elif run.pushed is not None and self.state.pushing and run.campaign.leveling:
+            tilt = run.campaign.tilt_off_goal
+            why = tilted_further_while_pressed(obs, float(np.linalg.norm(tilt(run.pushed.reference))),
+                                               float(np.linalg.norm(tilt(obs.object_in_holder))), self.settings)
         elif run.pushed is not None and self.state.pushing:
             why = tilted_while_pushed(obs, run.pushed.reference, self.settings)
         else:

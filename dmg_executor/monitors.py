@@ -68,6 +68,17 @@ def tilted_while_pushed(obs: Observation, pushed_reference: np.ndarray, s: Execu
             f"{np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
 
 
+def tilted_further_while_pressed(obs: Observation, began: float, now: float, s: ExecutorSettings) -> str | None:
+    """How far a level press tilted the object further off the goal's grasp axis than the `began` [rad] it started
+    at (`now` [rad] off it), when that is more than `slip_angle` by a pose certain of its tilt. A press turns the
+    object back towards the goal's axis on purpose, by as much as the tilt it began with: only a tilt growing away
+    from it is a slip."""
+    if now - began <= s.slip.angle or obs.object_tilt_sigma > s.slip.tilt_sigma:
+        return None
+    return (f"the pressed object tilted {np.rad2deg(now - began):.1f} deg further off the goal's grasp axis (that "
+            f"pose's uncertainty {np.rad2deg(obs.object_tilt_sigma):.1f} deg)")
+
+
 def poses_agree(poses: list[np.ndarray], s: ExecutorSettings) -> bool:
     """Are these object poses each within the slip limits of the last?"""
     return all(moved <= s.slip.distance and turned <= s.slip.angle

@@ -15,6 +15,7 @@ from dmg_executor.monitors import (
     moved_in_grip,
     poses_agree,
     tilt_since,
+    tilted_further_while_pressed,
     tilted_while_pushed,
 )
 from dmg_executor.settings import ExecutorSettings
@@ -77,6 +78,16 @@ def test_a_pushed_object_tilted_past_slip_angle_is_a_slip_only_by_a_pose_certain
     assert "tilted" in tilted_while_pushed(seen(0.1, tilt_deg=tilted), start, S)
     assert tilted_while_pushed(seen(0.1, tilt_deg=tilted, tilt_sigma_deg=np.rad2deg(S.slip.tilt_sigma) * 2), start, S) is None
     assert tilted_while_pushed(seen(0.1, tilt_deg=np.rad2deg(S.slip.angle) - 1.0), start, S) is None
+
+
+
+def test_a_level_press_turning_a_tilt_back_is_no_slip_only_one_tilting_the_object_further_off_the_goals_axis():
+    slip = np.rad2deg(S.slip.angle)
+    pressed = seen(0.1, tilt_deg=1.0)
+    assert tilted_further_while_pressed(pressed, np.deg2rad(slip + 1.6), np.deg2rad(1.0), S) is None   # 7.6 -> 1 deg
+    assert "further" in tilted_further_while_pressed(pressed, np.deg2rad(1.0), np.deg2rad(slip + 2.0), S)
+    unsure = seen(0.1, tilt_sigma_deg=np.rad2deg(S.slip.tilt_sigma) * 2)
+    assert tilted_further_while_pressed(unsure, np.deg2rad(1.0), np.deg2rad(slip + 2.0), S) is None
 
 
 def test_a_streak_counts_each_image_once_and_poses_agree_within_the_slip_limits():
