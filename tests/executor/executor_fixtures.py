@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dmg_executor.states.execute import Execute, Phase
+
 
 # The box: 100 x 60 x 40 mm centred at the origin.
 @pytest.fixture(scope="module")
@@ -132,3 +134,8 @@ def bracket_run(loop_parts):
         return executor
 
     return cell, loop, make
+
+
+def in_push_phase(executor) -> bool:
+    """Is the executor in EXECUTE's push phase (the pusher moving the object under P control)?"""
+    return isinstance(executor.state, Execute) and executor.state.phase == Phase.PUSH

@@ -1,6 +1,6 @@
-"""The executor in the closed loop (real MuJoCo, rendering and tag detection in one process), pushes:
-alpha, headway, far-side pushes with the holder turned, straddle pushes, level presses, rotation pushes
-that stop, steering, and the plug and bracket."""
+"""The executor in the closed loop (real MuJoCo, rendering and tag detection in one process), translation
+pushes: alpha, headway, far-side pushes with the holder turned, straddle pushes and carries, routes out of
+the object's hollows, steering the plug's tilt."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,24 +8,18 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dmg_executor.settings import ExecutorSettings
-from dmg_executor.states.execute import Execute, Phase
 from executor_fixtures import (  # noqa: F401
     box_surface,
     bracket_run,
     control_tick,
+    in_push_phase,
     loop_parts,
-    rotation_executor,
     translation_executor,
 )
 
 RULES = ExecutorSettings.defaults()     # the shipped rules (config/executor.yaml)
 
 pytestmark = pytest.mark.sim
-
-
-def _pushing(executor) -> bool:
-    """Is the executor in EXECUTE's push phase (the pusher moving the object under P control)?"""
-    return isinstance(executor.state, Execute) and executor.state.phase == Phase.PUSH
 
 
 def _run_recording(loop, executor, time_limit: float, record):
@@ -111,14 +105,6 @@ def test_a_push_that_made_no_headway_near_the_goal_ends_the_pushes(loop_parts, b
         assert not executor.done and executor.step.name == "APPROACH" and not settled, (executor.step, executor.notes)
 
 
-def _grasp_axis_tilt_deg(cell, executor) -> float:
-    """How far [deg] gripper 1's grasp axis on the object (ground truth) is tilted off the goal grasp's."""
-    from dmg_common.transforms import invert
-
-    reached, goal = invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after
-    return float(np.rad2deg(np.arccos(np.clip(reached[:3, 0] @ goal[:3, 0], -1.0, 1.0))))
-
-
 def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_the_pusher(bracket_run):
     from dmg_common.transforms import distance, invert, turn_between
     from dmg_executor.contract import Outcome
@@ -134,7 +120,7 @@ def test_a_push_only_the_far_side_allows_is_done_with_the_object_turned_towards_
     turned_while_pushing = []
 
     def record(observation):
-        if executor.step.name == "EXECUTE" and _pushing(executor):
+        if executor.step.name == "EXECUTE" and in_push_phase(executor):
             turned_while_pushing.append(
                 turn_between(observation.holder[:3, :3], holder_before[:3, :3]))
 
@@ -163,7 +149,7 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
     pushing_open = []
 
     def record(observation):
-        if executor.step.name == "EXECUTE" and _pushing(executor):
+        if executor.step.name == "EXECUTE" and in_push_phase(executor):
             pushing_open.append(cell.gripper_status("arm2").opening)
 
     outcome = _run_recording(loop, executor, 150, record)
@@ -191,7 +177,7 @@ def test_a_translation_out_towards_the_fingertips_is_carried_down_on_the_pushers
     carrying_forces = []
 
     def record(observation):
-        if _pushing(executor) and executor.run.push.carry:
+        if in_push_phase(executor) and executor.run.push.carry:
             carrying_forces.append(cell.gripper_status("arm1").max_force)
 
     outcome = _run_recording(loop, executor, 150, record)
@@ -311,139 +297,6 @@ def test_a_push_start_with_a_fingertip_inside_the_object_is_not_taken(bracket_ru
     assert not tip_inside(planned.start, planned.route.orientations[-1])
 
 
-def test_a_grasp_left_tilted_off_the_goals_grasp_axis_is_pressed_level_with_the_grip_held(bracket_run):
-    """The bracket held 5 deg about gripper 1's finger axis off the grasp the plan starts from (a sag the
-    grip holds), moved 5 mm along the fingers: the translation leaves the grasp axis tilted more than the
-    goal's angle tolerance. With `level_tilt_deg: 0` the run ends there, OUT_OF_TOLERANCE; by default a
-    press along the grasp axis beside the grasp turns it back to within 1 deg, the grip at the hold force
-    while pressing, and the run ends OK with the axis still within `level_tilt_deg` (sim: 3.9 -> 0.3 deg in
-    1.5 s at ~1 N)."""
-    from dmg_common.transforms import distance, invert
-    from dmg_executor.contract import Outcome
-
-    cell, loop, make = bracket_run
-    tilt = lambda executor: _grasp_axis_tilt_deg(cell, executor)   # noqa: E731
-
-    unleveled = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0, **{"level.tilt_deg": 0.0})
-    outcome = loop.run(unleveled, time_limit=150)
-    assert outcome.outcome == Outcome.OUT_OF_TOLERANCE and tilt(unleveled) > 3.0, (outcome.message, tilt(unleveled))
-    assert unleveled.run.campaign.level_index is None
-
-    executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
-    pressed, grips, ends = [], [], cell.time + 150
-    while not executor.done and cell.time < ends:
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
-        campaign = executor.run.campaign
-        if campaign.index == campaign.level_index and executor.step.name == "EXECUTE" and _pushing(executor):
-            pressed.append(tilt(executor))
-            grips.append(cell.gripper_status("arm1").max_force)
-    outcome = executor.result
-    assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt(executor))
-    assert "presses the object level" in outcome.message
-    assert pressed and pressed[0] > 3.0 and min(pressed) < 1.5, pressed      # pressed from > 3 deg to about 1 ...
-    # (the press ends at level.done along its axis; the tilt across that axis stays, 1.0 deg here)
-    assert tilt(executor) < np.rad2deg(executor.settings.level.tilt)         # ... and it stayed level
-    assert min(grips) == pytest.approx(executor.settings.grip.hold_force, rel=0.05), grips     # the grip held
-    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
-
-
-def test_a_pose_seen_while_the_holder_turns_for_a_level_press_does_not_judge_the_press(bracket_run):
-    """As in the level-press test, the holder turns the bracket about its fingers for the press; the images
-    taken while it turns are made to show it level (a pose from a moving object). Those are not trusted: the
-    press is still judged from the pose seen before the turn, made, and levels the bracket (judged from the
-    mid-turn pose, the press was taken as done before it began)."""
-    from dmg_common.transforms import invert
-    from dmg_executor.contract import Outcome
-    from dmg_executor.states.holder_turn import TurnHolder
-
-    cell, loop, make = bracket_run
-    executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=5.0)
-    campaign = executor.run.campaign
-    turned, pressed, ends = False, False, cell.time + 150
-    while not executor.done and cell.time < ends:
-        loop.perceive()
-        turn = executor.state
-        if (campaign.level_index is not None and isinstance(turn, TurnHolder) and loop.seen is not None
-                and abs(turn.angle - turn.turned) > np.deg2rad(20.0)):      # mid-turn
-            level = loop.seen.copy()
-            level[:3, :3] = invert(executor.primitives[-1].gripper_after)[:3, :3]
-            loop.seen, loop.seen_time, turned = level, cell.time, True
-        loop.apply(executor.update(loop.observe()))
-        pressed = pressed or (campaign.index == campaign.level_index and executor.step.name == "EXECUTE")
-        cell.run(loop.control_period)
-    outcome = executor.result
-    tilt = _grasp_axis_tilt_deg(cell, executor)
-    assert turned and pressed, outcome
-    assert outcome is not None and outcome.outcome == Outcome.OK, (outcome, tilt)
-    assert tilt < np.rad2deg(executor.settings.level.tilt), tilt     # pressed level (not pressed: ~4 deg)
-
-
-def test_level_presses_seen_from_the_turned_holder_are_made_without_turning_back_between_them(bracket_run):
-    """The bracket held 4 deg off its grasp about an axis between gripper 1's y and z, moved 5 mm along the
-    fingers: levelling it takes more than one press, each with the holder turned so the pusher reaches the
-    face. A press the camera saw made is judged, and the next planned, as the holder stands; it turns back
-    once, when the bracket is level or the next press needs the holder as it was (before: it turned back
-    after every press to judge it and turned again for the next, and ran out of time at 150 s)."""
-    from dmg_executor.contract import Outcome
-    from dmg_executor.states.holder_turn import ClearForTurn, TurnHolder
-
-    cell, loop, make = bracket_run
-    executor = make(shift=(0.0, 0.0, 0.005), tilt_deg=4.0, tilt_axis=(0.0, 0.92, 0.38))
-    campaign = executor.run.campaign
-
-    def turning_back(state) -> bool:      # (the holder going back to where it started turns nothing back)
-        return state.move.back if isinstance(state, ClearForTurn) else isinstance(state, TurnHolder) and state.back
-
-    events, turning, pressing, ends = [], False, False, cell.time + 150
-    while not executor.done and cell.time < ends:
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
-        if campaign.index != campaign.level_index:
-            continue
-        now_turning = executor.state.turns_holder
-        now_pressing = executor.step.name == "EXECUTE" and _pushing(executor)
-        if now_turning and not turning:
-            events.append("back" if turning_back(executor.state) else "turn")
-        if now_pressing and not pressing:
-            events.append("press, turned" if executor.run.holder_turns.far_side else "press")
-        turning, pressing = now_turning, now_pressing
-    outcome = executor.result
-    tilt = _grasp_axis_tilt_deg(cell, executor)
-    assert outcome is not None and outcome.outcome == Outcome.OK and tilt < 1.0, (outcome, tilt, events)
-    pairs = list(zip(events, events[1:]))
-    assert ("press, turned", "press, turned") in pairs, events      # two presses from one turn of the holder
-    assert events.count("turn") < events.count("press, turned"), events
-
-
-@pytest.mark.parametrize("presses, tilt_deg, finished", [(1, 2.0, False), (2, 2.6, False), (2, 2.0, True),
-                                                         (3, 2.6, True)])
-def test_a_third_level_press_is_made_only_while_most_of_the_goals_angle_tolerance_is_tilt(
-        loop_parts, box_surface, presses, tilt_deg, finished):
-    """Level presses go on while the grasp axis is tilted more than `level_tilt_deg` off the goal's: a second
-    press always, a third only while the tilt is more than `campaign.settled_share` of the goal's angle tolerance (2.4 deg
-    of 3 here), and never a fourth."""
-    from dataclasses import replace
-
-    from dmg_common.transforms import invert
-
-    cell, loop, _, _ = loop_parts
-    executor = translation_executor(loop_parts, box_surface, length=0.005)
-    assert executor.settings.level.pushes == 2 and executor.settings.campaign.settled_share * executor.settings.tolerances.goal_angle == pytest.approx(np.deg2rad(2.4))
-    campaign = executor.run.campaign
-    executor.primitives.append(replace(executor.primitives[-1]))      # the level press after the plan
-    campaign.index = campaign.level_index = len(executor.primitives) - 1
-    campaign.level_began, campaign.pushes = np.deg2rad(tilt_deg + 1.0), presses
-    tilted = invert(executor.primitives[-1].gripper_after)           # the goal's grasp, its axis tilted about y
-    tilted[:3, :3] = Rotation.from_euler("y", tilt_deg, degrees=True).as_matrix() @ tilted[:3, :3]
-    loop.perceive()
-    observation = replace(loop.observe(), object_in_holder=tilted, object_time=cell.time)
-    assert np.rad2deg(campaign.error_and_tolerance(observation)[0]) == pytest.approx(tilt_deg, abs=0.01)
-    assert campaign.finished(observation) is finished
-
-
 def test_a_push_that_would_come_up_along_the_holders_hand_from_its_palm_side_is_refused(loop_parts, box_surface):
     """A push line that leaves the space kept free round the object through its palm end would bring
     the pusher 300 mm up along gripper 1's hand and arm (sim: 12 s with the object unseen, then
@@ -477,7 +330,6 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     """At alpha 0 the holder does all of a rotation: turned 45 deg about its grasp axis, its hand is
     where the pusher would have to go for the next translation (the box 13 mm along its length).
     It goes back to where it started, the box held as it is, and the push is found from there."""
-    from scipy.spatial.transform import Rotation
 
     from dmg_common.transforms import distance, invert
     from dmg_executor.controller import PlanExecutor
@@ -522,182 +374,11 @@ def test_at_alpha_zero_a_push_the_turned_holder_blocks_is_made_once_the_holder_h
     assert not any("no safe push" in note for note in executor.notes), executor.notes
 
 
-def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loop_parts, box_surface):
-    """A pusher turning on while the object does not (slid along the face into a corner) would
-    shove the object out of the grip: the push stops with the grip closed and the rest is planned
-    again. Here the camera shows the object stuck after it has turned 1.5 deg more than the stall allowance
-    (push.turn_stall: stuck before that, the push counts as missing the face)."""
-    from dataclasses import replace
-
-    from dmg_common.transforms import invert
-    from dmg_executor.campaign import turned_since
-
-    cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, stuck, stuck_at = cell.time + 60.0, None, 0.0
-
-    def pusher_turned() -> float:
-        return abs(turned_since(executor.run.pushed.pusher, invert(cell.grasp_pose("arm1")) @ cell.grasp_pose("arm2")))
-
-    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        if stuck is not None:      # seen, freshly, where it stuck
-            observation = replace(observation, object_in_holder=stuck, object_time=observation.time)
-        elif (executor.step.name == "EXECUTE" and executor.run.pushed is not None
-              and abs(turned_since(executor.run.pushed.reference, observation.object_in_holder))
-              > executor.settings.push.turn_stall + np.deg2rad(1.5)):
-            stuck, stuck_at = observation.object_in_holder.copy(), pusher_turned()
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
-    assert stuck is not None and executor.step.name == "LEAVE", (executor.step, executor.result)
-    assert any("stopped turning with the pusher" in note for note in executor.notes), executor.notes
-    # Stopped within turn_stall (and the arm's lag) of the pusher turning on from there.
-    turned_on = pusher_turned() - stuck_at
-    assert 0.0 < turned_on < executor.settings.push.turn_stall + np.deg2rad(1.0), np.rad2deg(turned_on)
-
-
-def test_a_push_that_meets_the_object_before_the_gap_is_closed_stops_closing_it(loop_parts, box_surface):
-    """The pusher closes its gap to the face at push speed; where the face is nearer than believed
-    the camera sees the object move and the P-controlled push takes over (a rotation's pusher went
-    on to shove the box 5 mm across the fingers, then out of them). Here the pushing arm's reported
-    pose is 5 mm short along the push once it is planned: it stops at the start 1 mm from the face, not 6."""
-    from dataclasses import replace
-
-    from dmg_executor.campaign import slid_since
-
-    cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, began = cell.time + 60.0, None
-    while not (executor.step.name == "EXECUTE" and _pushing(executor)) and not executor.done \
-            and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        push = executor.run.push      # (None while the pusher is routed elsewhere: no push to be short along)
-        if push is not None and executor.step.name != "FIND_CONTACT":
-            pusher = observation.pusher.copy()
-            pusher[:3, 3] -= 0.005 * push.direction
-            observation = replace(observation, pusher=pusher)
-        if (executor.step.name == "EXECUTE" and isinstance(executor.state, Execute)
-                and executor.state.phase == Phase.TOUCH and began is None):
-            began = cell.object_in_gripper("arm1")
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
-    assert began is not None and _pushing(executor), (executor.step, executor.result)
-    slid = slid_since(began, cell.object_in_gripper("arm1"))
-    assert slid < 0.003, slid      # without the rule the pusher goes on the whole gap: 5 mm into the face
-
-
-def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_turning(loop_parts, box_surface):
-    """A rotation's pusher that shoves the object across the fingers instead of turning it pushes it
-    out of the grip (sim: the box at alpha 0.5): the push stops once the grasp has slid
-    `rotation_slide` on the object. Here the camera shows the object moving with the pusher, not turning."""
-    from dataclasses import replace
-
-    from dmg_common.transforms import invert
-    from dmg_executor.campaign import slid_since
-
-    cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, slid, touched = cell.time + 60.0, 0.0, None
-    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        if executor.step.name == "EXECUTE" and _pushing(executor):
-            pusher = (invert(observation.holder) @ observation.pusher)[:3, 3]
-            touched = pusher if touched is None else touched
-            shoved = executor.run.pushed.reference.copy()
-            shoved[:3, 3] += pusher - touched    # along with the pusher from where it met the object, unturned
-            slid = slid_since(executor.run.pushed.reference, shoved)
-            observation = replace(observation, object_in_holder=shoved, object_time=observation.time)
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
-    assert executor.step.name == "LEAVE", (executor.step, executor.result)
-    assert any("slid" in note for note in executor.notes), executor.notes
-    assert executor.settings.push.rotation_slide < slid < executor.settings.push.rotation_slide + 0.001, slid
-
-
-def test_a_rotation_of_an_object_narrow_at_the_grasps_middle_is_pushed_where_it_is_wide(loop_parts):
-    """A T held across its stem's foot and its bar's top, the fingers along the bar: through the grasp's
-    middle only the 30 mm stem is there, too narrow for any lever across or along the fingers. The push
-    line moves along the grasp axis into the bar, where the paper's push across the fingers beyond
-    their tips has its full lever (sim probe: the rotation was left 8 deg off the goal)."""
-    from dataclasses import replace
-
-    from dmg_common.transforms import apply, invert
-    from dmg_executor.controller import PlanExecutor
-    from dmg_executor.push_points import ObjectSurface
-    from dmg_executor.settings import ExecutorSettings
-    from dmg_planner.objects import Box, box_union_mesh
-    from dmg_planner.primitives import Primitive, PrimitiveKind
-
-    cell, loop, _, _ = loop_parts
-    stem = Box(np.array([0.0, 0.0, 0.02]), np.array([0.03, 0.04, 0.04]))      # 30 x 40 x 40 mm
-    bar = Box(np.array([0.0, 0.0, 0.05]), np.array([0.1, 0.04, 0.02]))        # 100 x 40 x 20 mm on top
-    surface = ObjectSurface(*box_union_mesh([stem, bar]), mass=0.1)
-    held = np.eye(4)      # gripper 1 in the T's frame: grasp axis along its z, fingers along -x, tips at the middle
-    held[:3, :3], held[:3, 3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], [0.0, 0.0, 0.03]
-    turned = held.copy()
-    turned[:3, :3] = Rotation.from_rotvec([0.0, 0.0, np.deg2rad(30.0)]).as_matrix() @ held[:3, :3]
-    foot, top = np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 0.06])
-    rotation = Primitive(PrimitiveKind.ROTATION, np.deg2rad(30.0), np.zeros(3), foot, foot, 0.0, np.deg2rad(30.0),
-                         top, top, turned)
-    cell.reset("box", restart_clock=True)
-    loop.forget()
-    executor = PlanExecutor(ExecutorSettings.defaults(), surface, [rotation], 0, 1.0, cell.time)
-    observed = loop.observe()
-    executor.update(replace(observed, object_in_holder=invert(held), object_time=observed.time, opening=0.06,
-                            object_covariance=None))
-    assert executor.run.push is not None, executor.result
-    push = executor.run.push.contact
-    assert push.point[2] > 0.04 + 1e-6, push.point          # on the bar
-    in_holder = apply(invert(held), push.point)           # across the fingers, the full lever beyond the tips
-    assert abs(push.direction @ [0.0, 1.0, 0.0]) > 0.99 and in_holder[2] == pytest.approx(
-        ExecutorSettings.defaults().push.depth, abs=1e-3), (push, in_holder)
-
-
-def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned_again(loop_parts, box_surface):
-    """A pusher turning in the air (the face not where the push was planned) would turn on until the
-    step's time limit, and the same push be planned again (sim: the plug's far side, five times).
-    Here the camera shows the object not turning at all: the push stops once the pusher has turned
-    `push.missed_turn_deg` beyond the sweep that brings its tips onto the face, and the next push is planned elsewhere."""
-    from dataclasses import replace
-
-    from dmg_common.transforms import invert
-    from dmg_executor.campaign import turned_since
-
-    cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, pusher_turned, pushing = cell.time + 60.0, 0.0, None
-    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        if executor.step.name == "EXECUTE" and _pushing(executor):     # seen, freshly, where it was
-            pushing, pushed = executor.state, executor.run.pushed
-            observation = replace(observation, object_in_holder=pushed.reference, object_time=observation.time)
-            pusher_turned = abs(turned_since(pushed.pusher, invert(observation.holder) @ observation.pusher))
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
-    assert executor.step.name == "LEAVE", (executor.step, executor.result)
-    assert any("missed the object" in note for note in executor.notes), executor.notes
-    sweep_to_face = pushing.sweep_to_face        # (as the push, now over, saw it)
-    limit = executor.settings.push.missed_turn + sweep_to_face
-    assert sweep_to_face < np.deg2rad(5.0)
-    assert limit < pusher_turned < limit + np.deg2rad(1.0), np.rad2deg([pusher_turned, sweep_to_face])
-    missed = executor.run.memory.missed[0]
-    while executor.step.name != "APPROACH" and not executor.done and cell.time < deadline:     # the next push
-        control_tick(loop, executor)
-    following = None if executor.run.push is None else executor.run.push.contact    # (None: the pusher sent home)
-    assert following is not None and not (np.linalg.norm(following.point - missed.point) < executor.settings.push.missed_near_distance
-                                          and following.direction @ missed.direction > np.cos(executor.settings.push.missed_near))
-
-
 def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by_the_pusher(loop_parts):
     """A grasp of the plug with one fingertip seated on a prong (planned with the paper's finger box
     from the contact, finger_tip_overhang 0): pushed 10 mm along the fingers
     without steering, the sliding plug turns off its grasp axis (nothing resists while it slides);
     with the pusher sliding along the grasp axis against the tilt it sees, it stays near the axis."""
-    from scipy.spatial.transform import Rotation
 
     from dmg_bringup.closed_loop import ClosedLoop
     from dmg_common.transforms import invert
@@ -739,53 +420,3 @@ def test_a_translation_that_tilts_the_plug_off_its_grasp_axis_is_steered_back_by
 
     unsteered, steered = largest_tilt(0.0), largest_tilt(ExecutorSettings.defaults().steering.gain)
     assert unsteered > 4.0 and steered < 2.0, (unsteered, steered)
-
-
-def test_an_object_held_across_an_edge_is_turned_by_a_push_square_onto_a_face(loop_parts):
-    """The plug held 45 deg about its grasp axis from square: the pushes across
-    and along the fingers meet its faces at 45 deg within edge_margin of their edges; the one square
-    onto a face turns it."""
-    from scipy.spatial.transform import Rotation
-
-    from dmg_bringup.closed_loop import ClosedLoop
-    from dmg_common.transforms import invert, turn_between
-    from dmg_executor.controller import PlanExecutor
-    from dmg_executor.push_points import ObjectSurface
-    from dmg_executor.settings import ExecutorSettings
-    from dmg_executor.views import TagLayout
-    from dmg_perception.estimator import ObjectPoseEstimator
-    from dmg_planner.graph import GraphParameters, build_graph
-    from dmg_planner.objects import load_object
-    from dmg_planner.search import GripperPose, plan
-
-    cell = loop_parts[0]
-    model = load_object("plug")
-    parameters = GraphParameters(seed_resolution=model.seed_resolution)
-    graph = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
-    loop, surface, tags = ClosedLoop(cell, ObjectPoseEstimator([model])), ObjectSurface.of(model), TagLayout.of(model)
-    start = np.eye(4)       # gripper 1 in the plug's frame: its fingers on the +-x faces, turned 45 deg about x
-    start[:3, :3], start[:3, 3] = Rotation.from_rotvec([np.pi / 4, 0.0, 0.0]).as_matrix(), [0.01, 0.005, -0.015]
-    goal = start.copy()
-    goal[:3, :3] = np.eye(3)
-    cell.reset("plug", object_in_gripper=invert(start), restart_clock=True)
-    loop.watch(0.5)
-    pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
-    planned = plan(graph, pose(invert(loop.seen)), pose(goal))
-    assert [p.kind.name for p in planned.primitives][:1] == ["ROTATION"], planned.message
-    executor = PlanExecutor(ExecutorSettings.defaults(), surface, planned.primitives[:1], planned.principal_finger, 1.0,
-                            cell.time, loop.camera_model(), tags)
-    slants = []      # how far each push's face is slanted from the push [deg]
-    ends = cell.time + 60.0
-    campaign = executor.run.campaign
-    while campaign.index == 0 and not executor.done and cell.time < ends:     # the rotation (corrections follow)
-        loop.perceive()
-        loop.apply(executor.update(loop.observe()))
-        cell.run(loop.control_period)
-        if executor.step.name == "EXECUTE" and (not slants or slants[-1][0] != campaign.pushes):
-            push = executor.run.push.contact
-            slants.append((campaign.pushes, np.rad2deg(np.arccos(-push.normal @ push.direction))))
-    assert campaign.index == 1 and not any("left" in note for note in executor.notes), (executor.notes, executor.result)
-    assert slants and max(slant for _, slant in slants) < 10.0, slants     # square onto the face
-    turned = executor.primitives[0].gripper_after
-    turned_off = turn_between(invert(cell.object_in_gripper("arm1"))[:3, :3], turned[:3, :3])
-    assert np.rad2deg(turned_off) < 3.0, np.rad2deg(turned_off)
