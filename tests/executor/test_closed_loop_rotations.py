@@ -19,6 +19,22 @@ from executor_fixtures import (  # noqa: F401
 pytestmark = pytest.mark.sim
 
 
+def _rotation_until_leave(loop_parts, box_surface, while_pushing):
+    """The box's rotation run until the pusher leaves its push (or 60 s), each observation made in the push
+    phase first passed through `while_pushing(executor, observation)`."""
+    cell, loop, _, _ = loop_parts
+    executor = rotation_executor(loop_parts, box_surface)
+    deadline = cell.time + 60.0
+    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
+        loop.perceive()
+        observation = loop.observe()
+        if executor.step.name == "EXECUTE" and in_push_phase(executor):
+            observation = while_pushing(executor, observation)
+        loop.apply(executor.update(observation))
+        cell.run(loop.control_period)
+    return executor
+
+
 def test_a_rotation_push_stops_when_the_object_stops_turning_with_the_pusher(loop_parts, box_surface):
     """A pusher turning on while the object does not (slid along the face into a corner) would
     shove the object out of the grip: the push stops with the grip closed and the rest is planned
@@ -94,21 +110,18 @@ def test_a_rotation_push_stops_when_the_object_slides_in_the_grip_instead_of_tur
     from dmg_common.transforms import invert
     from dmg_executor.campaign import slid_since
 
-    cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, slid, touched = cell.time + 60.0, 0.0, None
-    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        if executor.step.name == "EXECUTE" and in_push_phase(executor):
-            pusher = (invert(observation.holder) @ observation.pusher)[:3, 3]
-            touched = pusher if touched is None else touched
-            shoved = executor.run.pushed.reference.copy()
-            shoved[:3, 3] += pusher - touched    # along with the pusher from where it met the object, unturned
-            slid = slid_since(executor.run.pushed.reference, shoved)
-            observation = replace(observation, object_in_holder=shoved, object_time=observation.time)
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
+    seen = {"slid": 0.0, "touched": None}
+
+    def shoved_along(executor, observation):
+        pusher = (invert(observation.holder) @ observation.pusher)[:3, 3]
+        seen["touched"] = pusher if seen["touched"] is None else seen["touched"]
+        shoved = executor.run.pushed.reference.copy()
+        shoved[:3, 3] += pusher - seen["touched"]    # along with the pusher from where it met the object, unturned
+        seen["slid"] = slid_since(executor.run.pushed.reference, shoved)
+        return replace(observation, object_in_holder=shoved, object_time=observation.time)
+
+    executor = _rotation_until_leave(loop_parts, box_surface, shoved_along)
+    slid = seen["slid"]
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("slid" in note for note in executor.notes), executor.notes
     assert executor.settings.push.rotation_slide < slid < executor.settings.push.rotation_slide + 0.001, slid
@@ -164,17 +177,15 @@ def test_a_rotation_push_that_turns_the_pusher_but_not_the_object_is_not_planned
     from dmg_executor.campaign import turned_since
 
     cell, loop, _, _ = loop_parts
-    executor = rotation_executor(loop_parts, box_surface)
-    deadline, pusher_turned, pushing = cell.time + 60.0, 0.0, None
-    while executor.step.name != "LEAVE" and not executor.done and cell.time < deadline:
-        loop.perceive()
-        observation = loop.observe()
-        if executor.step.name == "EXECUTE" and in_push_phase(executor):     # seen, freshly, where it was
-            pushing, pushed = executor.state, executor.run.pushed
-            observation = replace(observation, object_in_holder=pushed.reference, object_time=observation.time)
-            pusher_turned = abs(turned_since(pushed.pusher, invert(observation.holder) @ observation.pusher))
-        loop.apply(executor.update(observation))
-        cell.run(loop.control_period)
+    seen = {"turned": 0.0, "pushing": None}
+
+    def unturned(executor, observation):     # seen, freshly, where it was
+        seen["pushing"], pushed = executor.state, executor.run.pushed
+        seen["turned"] = abs(turned_since(pushed.pusher, invert(observation.holder) @ observation.pusher))
+        return replace(observation, object_in_holder=pushed.reference, object_time=observation.time)
+
+    executor = _rotation_until_leave(loop_parts, box_surface, unturned)
+    deadline, pusher_turned, pushing = cell.time + 60.0, seen["turned"], seen["pushing"]
     assert executor.step.name == "LEAVE", (executor.step, executor.result)
     assert any("missed the object" in note for note in executor.notes), executor.notes
     sweep_to_face = pushing.sweep_to_face        # (as the push, now over, saw it)
