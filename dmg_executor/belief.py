@@ -32,6 +32,11 @@ def mean_covariance(covariances: list[np.ndarray | None]) -> np.ndarray | None:
     return np.sum(covariances, axis=0) / len(covariances) ** 2
 
 
+def _covariance(obs: Observation) -> np.ndarray | None:
+    """A copy of the observation's pose covariance (None: taken as certain)."""
+    return None if obs.object_covariance is None else np.array(obs.object_covariance, float)
+
+
 @dataclass
 class PoseTrust:
     """How certain a perceived pose must be to count as evidence (from ExecutorSettings)."""
@@ -62,7 +67,7 @@ class HeldPose:
     def take(self, obs: Observation) -> None:
         """Take this pose as the one the closed grip must keep."""
         self.reference, self.sigma = obs.object_in_holder.copy(), obs.object_position_sigma
-        self.covariance = None if obs.object_covariance is None else np.array(obs.object_covariance, float)
+        self.covariance = _covariance(obs)
         self.poses = [self.reference] if self.trust.certain(obs) else []
         self.covariances = [self.covariance] if self.poses else []
         self.pose_time = obs.object_time
@@ -85,7 +90,7 @@ class HeldPose:
                 or obs.object_time <= self.pose_time or not self.trust.certain(obs)):
             return
         self.poses.append(obs.object_in_holder.copy())
-        self.covariances.append(None if obs.object_covariance is None else np.array(obs.object_covariance, float))
+        self.covariances.append(_covariance(obs))
         self.pose_time = obs.object_time
         self.reference = mean_pose(np.array(self.poses))
         self.covariance = mean_covariance(self.covariances)
