@@ -104,8 +104,11 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
             raise PushError(reasons([*problems, ("the wrist camera would see none of the object's tags where "
                                                    "the only push, a carry, starts")]))
         # The most progress: the full motion when the camera can watch it; a push rather than a carry unless
-        # the carry goes a tolerance further (a push's force is the pusher's own, a carry's the weight's share).
-        return max(candidates, key=lambda c: float(motion @ c[0].motion) - s.tolerances.position * c[0].carry)[0]
+        # the carry goes a tolerance further (a push's force is the pusher's own, a carry's the weight's share);
+        # a push between gripper 1's fingers only where no other push or carry goes within two tolerances as
+        # far (its tips work next to those fingers and the palm, its arm reaching round to come in across them).
+        return max(candidates, key=lambda c: float(motion @ c[0].motion) - s.tolerances.position
+                   * (c[0].carry + 2 * (c[0].sideways and not c[0].spread)))[0]
     limited = float(np.clip(run.campaign.errors[1], -s.push.max_angle, s.push.max_angle))
     # The object must turn by `limited` about x: a finger rotation of -limited about +x. The push
     # goes across the fingers (beyond their tips, or between them towards the palm where that
@@ -386,18 +389,21 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     to_holder = invert(holder)
     point_h = apply(to_holder, point)
     direction_h = to_holder[:3, :3] @ direction
-    # Where the last stretch begins: a push comes in along its line; a straddle push along the pusher's
+    # Where the last stretch begins: a push comes in along its line; a sideways push along the pusher's
     # fingers, known once its orientation is (below).
-    outside_h = (None if push.spread
+    tips_in_line = False
+    outside_h = (None if push.sideways
                  else point_h - (box.exit_distance(point_h, -direction_h) + s.approach.exit_margin) * direction_h)
     if outside_h is not None and outside_h[2] < box.low[2]:
-        # The line leaves the kept-free space through its palm end: the pusher would come up along
-        # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST).
-        raise RouteError(f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along "
-                         "the holding gripper's hand from its palm side")
+        # The line leaves the kept-free space through its palm end: along it the pusher would come up along
+        # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST); it comes in
+        # across gripper 1's fingers instead, where it can push between them.
+        (push, tips_in_line), outside_h = _between(run, obs, push, point_h), None
     provisional = point - (1.5 * s.gripper.tip_radius + s.push.gap) * direction     # the reach depends on the orientation
     if push.spread:
         views, seen = run.sight.straddling_views(obs, provisional, direction, occluders)
+    elif push.sideways:
+        views, seen = run.sight.between_views(obs, provisional, direction, tips_in_line, occluders)
     else:   # where the push starts, the tips must not be spread along the grasp axis
         views, seen = run.sight.views(obs, provisional, level=holder[:3, 0], occluders=occluders, in_line=direction)
     # The best view whose hand keeps clear of the holding gripper (usually the first) and whose
@@ -414,7 +420,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     for first, view in enumerate(views):
         start = push_start(point, normal, direction, view, s.gripper.tip_radius, s.push.gap, s.fingertips, s.push.slant_limit,
                            push.spread)
-        clash = run.sight.hands_clash(start, view, occluders)
+        clash = run.sight.hands_clash(start, view, occluders, between_fingers=push.sideways and not push.spread)
         clashes += clash
         shells = fingertip_shells(view, s.gripper.tip_radius, s.fingertips.tip_clearance, push.spread)
         if clash or run.surface.inside(apply(to_object, start + shells)).any():
@@ -438,7 +444,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     views, seen = views[first:], seen[first:]
     start = meeting_start(start, views[0], direction, object_pose, run.surface, s.gripper.tip_radius, s.push.gap, s.fingertips,
                           push.spread)
-    if not push.spread:
+    if not push.sideways:
         # The last stretch runs along the line of the pusher's start, which the tips set beside the push point's
         # own line; on its way in no other part of the object may come first (sim, a T turned 25 deg: the way in
         # from the push point's line cut its bar's corner, and the tip knocked the object out of the grip).
@@ -450,7 +456,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
             raise RouteError(f"on the way in to the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              f"a fingertip would meet the object {early * 1000:.0f} mm before the push start")
     else:
-        outside_h = _straddle_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
+        outside_h = _sideways_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
                                     invert(obs.object_in_holder))
     pusher_h = apply(to_holder, obs.pusher[:3, 3])
     waypoints = [apply(holder, w) for w in run.plan_route(pusher_h, outside_h, box, run.home_in(holder))]
@@ -461,17 +467,44 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
                 blind=run.sight.modelled and seen[0] == 0), int(seen[0])
 
 
-def _straddle_entry(run: Run, start_h: np.ndarray, orientation_h: np.ndarray, spread: float, box: KeepOut,
+def _between(run: Run, obs: Observation, push: PushPoint, point_h: np.ndarray) -> tuple[PushPoint, bool]:
+    """A push whose line meets the object from gripper 1's palm side, made between gripper 1's fingers: the
+    pusher's closed tips come in across those fingers along its own (`point_h`: the push point, holder
+    frame), side by side along the grasp axis where both fit between the fingers, else one behind the other
+    along the push (then they need a tip's width more room towards the palm). Translations only: the pusher
+    neither turns about the grasp axis nor slides along it there. The push, and whether its tips lie along
+    it. RouteError where `between.enabled` is off or the tips fit neither between the fingers nor short of
+    the palm."""
+    s = run.settings
+    refusal = (f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along the holding "
+               "gripper's hand from its palm side")
+    if (not s.between.enabled or run.campaign.leveling
+            or run.campaign.primitive.kind != PrimitiveKind.TRANSLATION):
+        raise RouteError(refusal)
+    tip = s.gripper.tip_radius
+    free = obs.opening / 2 - abs(float(point_h[0])) - s.fingertips.tip_clearance   # from the push line to a finger
+    if free < tip:
+        raise RouteError(f"{refusal}, and a fingertip of the pusher ({2 * tip * 1000:.0f} mm) does not fit between "
+                         f"its fingers ({obs.opening * 1000:.0f} mm apart)")
+    in_line = free < 2 * tip
+    room = s.gripper.finger_length - 2 * tip * (1 + in_line) - s.push.gap - s.approach.clearance
+    if -float(point_h[2]) > room:
+        raise RouteError(f"{refusal}, {-point_h[2] * 1000:.0f} mm towards its palm (the pusher's tips fit "
+                         f"between its fingers up to {room * 1000:.0f} mm)")
+    return replace(push, sideways=True), bool(in_line)
+
+
+def _sideways_entry(run: Run, start_h: np.ndarray, orientation_h: np.ndarray, spread: float, box: KeepOut,
                     object_in_holder_inverse: np.ndarray) -> np.ndarray:
-    """Where (holder frame) a straddle push's last stretch begins: out of the kept-free space along the
-    pusher's fingers from its start, so that the open tips come in either side of gripper 1's fingers,
-    clear of the object all the way (RouteError if not)."""
+    """Where (holder frame) a sideways push's last stretch begins: out of the kept-free space along the
+    pusher's fingers from its start, so that its tips (`spread` apart, 0 closed) come in either side of or
+    between gripper 1's fingers, clear of the object all the way (RouteError if not)."""
     s = run.settings
     fingers = orientation_h[:, 2]
     length = box.exit_distance(start_h, -fingers) + s.approach.exit_margin
     shells = fingertip_shells(orientation_h, s.gripper.tip_radius, s.fingertips.tip_clearance, spread)
     along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
     if run.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
-        raise RouteError(f"the straddle push's open fingertips would meet the object on their way in to "
+        raise RouteError(f"the pusher's fingertips would meet the object on their way in along its fingers to "
                          f"{np.round(start_h * 1000, 1).tolist()} mm (holder frame)")
     return start_h - length * fingers

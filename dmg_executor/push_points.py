@@ -37,6 +37,8 @@ class PushPoint:
     normal: np.ndarray      # outward surface normal there
     direction: np.ndarray   # unit direction the pusher moves (and the object with it), object frame
     spread: float = 0.0     # m between the pusher's fingertip centres: 0 = closed (side by side, touching)
+    sideways: bool = False  # the pusher comes in along its own fingers, across the push (a straddle push, or one
+    #                         between gripper 1's fingers), and leaves the same way
     carry: bool = False     # the tips hold the face from below and move away from it: the object follows, let down
     turn_limit: float = np.inf   # rad a rotation push may turn the object before the grasp slides off its faces
 
@@ -170,7 +172,7 @@ def straddle_push(surface: ObjectSurface, middle, along, across, half_spreads, t
         direction = along - (along @ line) / (line @ line) * line
         normal = sides[0].normal + sides[1].normal
         return PushPoint((sides[0].point + sides[1].point) / 2, normal / np.linalg.norm(normal),
-                         direction / np.linalg.norm(direction), float(np.linalg.norm(line)))
+                         direction / np.linalg.norm(direction), float(np.linalg.norm(line)), sideways=True)
     raise PushError(reasons(problems) or "no straddle spread given")
 
 

@@ -40,6 +40,12 @@ class Push:
         return self.contact.spread
 
     @property
+    def sideways(self) -> bool:
+        """The pusher comes in along its own fingers and leaves the same way (a straddle push, a push between
+        gripper 1's fingers): its tips are beside or between gripper 1's fingers all through the push."""
+        return self.contact.sideways
+
+    @property
     def carry(self) -> bool:
         """A carry: the tips meet the face along `direction`, then move back the way they came, the object
         following under its weight."""

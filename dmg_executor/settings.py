@@ -156,6 +156,15 @@ class StraddleSettings:
 
 
 @dataclass(frozen=True)
+class BetweenSettings:
+    """Pushes between gripper 1's fingers on the object's palm side, the pusher coming in across them (`between.*`)."""
+
+    enabled: bool
+    fingers: float                 # rad
+    twist: float                   # rad
+
+
+@dataclass(frozen=True)
 class CarrySettings:
     """Carries: the object let down along gripper 1's fingers on the pusher's tips (`carry.*`)."""
 
@@ -282,6 +291,7 @@ class ExecutorSettings:
     look: LookSettings
     level: LevelSettings
     straddle: StraddleSettings
+    between: BetweenSettings
     carry: CarrySettings
     views: ViewSettings
     limits: LimitSettings

@@ -65,32 +65,55 @@ class Sight:
         rules = self.settings.approach
         return [views[0]] + distinct(views[1:][seen[1:] > 0], views[0], rules.other_views, rules.distinct_view)
 
-    def hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders) -> bool:
+    def hands_clash(self, place: np.ndarray, orientation: np.ndarray, occluders: Occluders,
+                    between_fingers: bool = False) -> bool:
         """Would the pusher with its tips at `place`, turned `orientation`, have its hand in the holding
         gripper or its fingers in that gripper's hand? (The arms do not collide in the simulation;
-        they would on the robot.) Fingers near fingers are the keep-out box's business."""
+        they would on the robot.) Fingers near fingers are the keep-out box's business, and so are
+        fingers `between_fingers` of the holding gripper, kept short of its palm where that push is
+        planned (the hand's spheres, round where the hand is flat, reach in front of the palm on its axis)."""
         pusher = np.eye(4)
         pusher[:3, :3], pusher[:3, 3] = orientation, place
         return (overlap(placed(self.shape.hand(), pusher), occluders.fixed)
-                or overlap(placed(occluders.riding, pusher), occluders.hand))
+                or (not between_fingers and overlap(placed(occluders.riding, pusher), occluders.hand)))
+
+    def sideways_views(self, obs: Observation, place: np.ndarray, fingers_along: np.ndarray, tips_along: np.ndarray,
+                       fingers_limit: float, twist_limit: float, occluders: Occluders,
+                       refusal: str) -> tuple[np.ndarray, np.ndarray]:
+        """The pusher orientations (best view first) at `place` (base frame) for a push it comes in to along its
+        own fingers: those along `fingers_along` (either way, within `fingers_limit` [rad]), the tips side by
+        side along `tips_along` - rolled about the fingers from the nearest views the arm can take
+        (`twist_limit` [rad] at most) onto exactly that line (RouteError saying `refusal` if none)."""
+        views, seen = self.views(obs, place, occluders=occluders)
+        keep = ((np.abs(views[:, :, 0] @ tips_along) > np.cos(twist_limit))
+                & (np.abs(views[:, :, 2] @ fingers_along) > np.cos(fingers_limit)))
+        if not keep.any():
+            raise RouteError(f"no pusher orientation its arm can take {refusal}")
+        views, seen = views[keep], seen[keep]
+        fingers = views[:, :, 2]
+        tips = tips_along - (fingers @ tips_along)[:, None] * fingers
+        tips *= np.sign(views[:, :, 0] @ tips_along)[:, None] / np.linalg.norm(tips, axis=1, keepdims=True)
+        return np.stack([tips, np.cross(fingers, tips), fingers], axis=2), seen
 
     def straddling_views(self, obs: Observation, place: np.ndarray, direction: np.ndarray,
                          occluders: Occluders) -> tuple[np.ndarray, np.ndarray]:
-        """The pusher orientations (best view first) at `place` (base frame) whose fingertips, opened, straddle
-        gripper 1's fingers for a push along `direction` (base frame): the fingers along the grasp axis (either
-        way), the tips spread across it and the push - rolled about the fingers from the nearest views the arm
-        can take (`straddle.twist` at most) onto exactly that line (RouteError if none)."""
-        views, seen = self.views(obs, place, occluders=occluders)
+        """Orientations whose fingertips, opened, straddle gripper 1's fingers for a push along `direction`
+        (base frame): the fingers along the grasp axis, the tips spread across it and the push."""
         grasp_axis = obs.holder[:3, 0]
         spread = np.cross(direction, grasp_axis)
-        spread /= np.linalg.norm(spread)
-        keep = ((np.abs(views[:, :, 0] @ spread) > np.cos(self.settings.straddle.twist))
-                & (np.abs(views[:, :, 2] @ grasp_axis) > np.cos(self.settings.straddle.fingers)))
-        if not keep.any():
-            raise RouteError("no pusher orientation its arm can take puts its fingers along gripper 1's grasp axis "
-                             "with the tips either side of gripper 1's fingers")
-        views, seen = views[keep], seen[keep]
-        fingers = views[:, :, 2]
-        tips = spread - (fingers @ spread)[:, None] * fingers
-        tips *= np.sign(views[:, :, 0] @ spread)[:, None] / np.linalg.norm(tips, axis=1, keepdims=True)
-        return np.stack([tips, np.cross(fingers, tips), fingers], axis=2), seen
+        rules = self.settings.straddle
+        return self.sideways_views(obs, place, grasp_axis, spread / np.linalg.norm(spread), rules.fingers, rules.twist,
+                                   occluders, "puts its fingers along gripper 1's grasp axis with the tips either "
+                                   "side of gripper 1's fingers")
+
+    def between_views(self, obs: Observation, place: np.ndarray, direction: np.ndarray, tips_in_line: bool,
+                      occluders: Occluders) -> tuple[np.ndarray, np.ndarray]:
+        """Orientations whose closed fingertips come in between gripper 1's fingers for a push along
+        `direction` (base frame): the fingers across both the grasp axis and the push, the tips side by
+        side along the grasp axis, or one behind the other along the push (`tips_in_line`)."""
+        grasp_axis = obs.holder[:3, 0]
+        across = np.cross(direction, grasp_axis)
+        rules = self.settings.between
+        return self.sideways_views(obs, place, across / np.linalg.norm(across), direction if tips_in_line else grasp_axis,
+                                   rules.fingers, rules.twist, occluders, "puts its fingers across gripper 1's grasp "
+                                   "axis with the closed tips between gripper 1's fingers")

@@ -325,8 +325,8 @@ class Execute(State):
         torque about the grasp axis balances the weight's, steered against the turn seen since the push began
         (`balanced_line`), within the face; a carry's line stays where it was planned."""
         s, pushed = run.settings, run.pushed
-        if run.push.carry or run.push_spread or pushed.reckoning.blind or s.steering.turn_offset_limit <= 0.0:
-            return self.line_offset      # (a straddle push's tips are beside gripper 1's fingers; blind, nothing
+        if run.push.carry or run.push.sideways or pushed.reckoning.blind or s.steering.turn_offset_limit <= 0.0:
+            return self.line_offset      # (a sideways push's tips are beside or between gripper 1's fingers; blind, nothing
             #                              would tell what the line does)
         if run.fresh(obs):
             self.turn_seen = turned_since(pushed.reference, obs.object_in_holder)
@@ -346,8 +346,8 @@ class Execute(State):
         (`tilt_steering`), from fresh poses certain of their tilt only."""
         s, pushed = run.settings, run.pushed
         if (s.steering.gain == 0.0 or pushed.reckoning.blind or obs.object_tilt_sigma > s.slip.tilt_sigma
-                or obs.time - obs.object_time > s.monitors.stale_after or run.push_spread or run.push.carry):
-            return 0.0      # (a straddle push's tips slid along the grasp axis would leave the face beside the fingers;
+                or obs.time - obs.object_time > s.monitors.stale_after or run.push.sideways or run.push.carry):
+            return 0.0      # (a sideways push's tips slid along the grasp axis would leave the face beside the fingers or meet them;
             #                  a carry's tips hold the object up: sliding them would drag it off the grasp axis)
         tilt = turn_since(pushed.reference, obs.object_in_holder)
         pusher = invert(obs.holder) @ obs.pusher

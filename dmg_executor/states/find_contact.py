@@ -125,6 +125,10 @@ class FindContact(State):
         if outside:
             return run.abort(Outcome.LIMIT_VIOLATION, f"primitive {campaign.index}: the push needs the pusher at "
                              f"{np.round(outside[0], 3).tolist()} m, outside the workspace")
+        if push.sideways and not push.spread:
+            between = f"a push of primitive {campaign.index} went between gripper 1's fingers"
+            if between not in campaign.notes:
+                run.note(between)
         run.pilot.follow(push.route)
         search.sought_certain = False
         return Transition(approach.Approach())

@@ -16,7 +16,8 @@ from dmg_executor.states.base import State, Transition
 
 class Leave(State):
     """Back out along the push line as the object now lies (a rotation turned it with the pusher); a
-    straddle push's pusher backs off the face by `gap`, then out along its fingers the way it came in."""
+    sideways push's pusher (a straddle push, a push between gripper 1's fingers) backs off the face by
+    `gap`, then out along its fingers the way it came in."""
 
     step = Step.LEAVE
 
@@ -31,7 +32,7 @@ class Leave(State):
         box = run.keep_out(obs)
         to_holder = invert(obs.holder)
         pusher = apply(to_holder, obs.pusher[:3, 3])
-        if run.push_spread:
+        if run.push.sideways:
             backed = pusher - s.push.gap * local
             fingers = to_holder[:3, :3] @ obs.pusher[:3, 2]
             out = box.exit_distance(backed, -fingers) + s.approach.exit_margin

@@ -38,9 +38,10 @@ def loop_parts():
     cell.close()
 
 
-def box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, **overrides):
-    """An executor for the plan from the box's default grasp (freshly reset, the clock at 0: a test runs
-    the same whichever tests ran before it in the same cell) to goal_from_start(start)."""
+def box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, held_out: float = 0.0, **overrides):
+    """An executor for the plan from the box's default grasp, or one `held_out` [m] further out along the
+    fingers (freshly reset, the clock at 0: a test runs the same whichever tests ran before it in the same
+    cell) to goal_from_start(start)."""
     from scipy.spatial.transform import Rotation
 
     from dmg_common.transforms import invert
@@ -49,7 +50,11 @@ def box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, *
     from dmg_planner.search import GripperPose, plan
 
     cell, loop, graph, tags = loop_parts
-    start = invert(cell.reset("box", restart_clock=True).object_in_gripper)
+    held = cell.reset("box", restart_clock=True).object_in_gripper
+    if held_out:
+        held[2, 3] += held_out
+        held = cell.reset("box", object_in_gripper=held, restart_clock=True).object_in_gripper
+    start = invert(held)
     loop.forget()
     pose = lambda t: GripperPose(t[:3, 3], Rotation.from_matrix(t[:3, :3]).as_quat())   # noqa: E731
     result = plan(graph, pose(start), pose(goal_from_start(start)))
@@ -57,13 +62,15 @@ def box_executor(loop_parts, box_surface, goal_from_start, alpha: float = 1.0, *
                         result.principal_finger, alpha, cell.time, loop.camera_model(), tags)
 
 
-def translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, **overrides):
-    """An executor for a translation (15 mm) of the box's default grasp along the fingers, freshly reset."""
+def translation_executor(loop_parts, box_surface, alpha: float = 1.0, length: float = 0.015, held_out: float = 0.0,
+                         **overrides):
+    """An executor for a translation (15 mm) of the box's default grasp (or one `held_out` further out) along the
+    fingers, freshly reset."""
     def goal(start: np.ndarray) -> np.ndarray:
         moved = start.copy()
         moved[:3, 3] += length * start[:3, 2]
         return moved
-    return box_executor(loop_parts, box_surface, goal, alpha, **overrides)
+    return box_executor(loop_parts, box_surface, goal, alpha, held_out, **overrides)
 
 
 def rotation_executor(loop_parts, box_surface):

@@ -16,7 +16,7 @@ from dmg_executor.states.find_contact import FindContact
 from dmg_executor.states.leave import Leave
 from synthetic import box_cell, box_run, pose, translation
 
-NO_STRADDLE = {"straddle.opening": 0.0}   # (the box is wide enough for one: only the carry is left)
+NO_STRADDLE = {"straddle.opening": 0.0, "between.enabled": False}   # (the box takes either: only the carry is left)
 DOWN_THE_FINGERS = (0.0, -0.010, 0.0)     # the grasp 10 mm up the box (object y is gripper 1's z): the box goes down
 
 

@@ -162,7 +162,8 @@ def test_a_translation_out_towards_the_fingertips_is_pushed_with_the_pushers_tip
 
 
 def test_a_translation_out_towards_the_fingertips_is_carried_down_on_the_pushers_tips(loop_parts):
-    """The box 15 mm out of the grip along gripper 1's fingers, which point down, without straddle pushes:
+    """The box 15 mm out of the grip along gripper 1's fingers, which point down, without straddle pushes or
+    pushes between the fingers:
     the pusher's tips meet its lower face from below with the grip held, the grip loosens to hold only a
     share of the weight, and the box comes down with the tips."""
     from dmg_common.transforms import distance, invert
@@ -173,7 +174,7 @@ def test_a_translation_out_towards_the_fingertips_is_carried_down_on_the_pushers
 
     cell, loop, _, _ = loop_parts
     executor = translation_executor(loop_parts, ObjectSurface.of(load_object("box")), length=-0.015,
-                                    **{"straddle.opening": 0.0})
+                                    **{"straddle.opening": 0.0, "between.enabled": False})
     carrying_forces = []
 
     def record(observation):
@@ -187,6 +188,33 @@ def test_a_translation_out_towards_the_fingertips_is_carried_down_on_the_pushers
     assert carrying_forces and max(carrying_forces) == pytest.approx(share, rel=0.05)
     assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
     assert cell.gripper_status("arm1").max_force == pytest.approx(s.grip.hold_force)
+
+
+def test_a_translation_out_towards_the_fingertips_is_pushed_between_the_fingers(loop_parts):
+    """The box, held 20 mm further out than its default grasp (its palm-side face 30 mm in), 12 mm out of
+    the grip along gripper 1's fingers without straddle pushes or carries: the pusher's closed tips come in
+    across gripper 1's fingers, push its palm-side face between them, and leave the way they came."""
+    from dmg_common.transforms import distance, invert
+    from dmg_executor.contract import Outcome
+    from dmg_executor.push_points import ObjectSurface
+    from dmg_planner.objects import load_object
+
+    cell, loop, _, _ = loop_parts
+    executor = translation_executor(loop_parts, ObjectSurface.of(load_object("box")), length=-0.012, held_out=0.020,
+                                    **{"straddle.opening": 0.0, "carry.enabled": False})
+    fingers_while_pushing = []
+
+    def record(observation):
+        if in_push_phase(executor):
+            fingers_while_pushing.append(observation.holder[:3, :3].T @ observation.pusher[:3, 2])
+
+    outcome = _run_recording(loop, executor, 150, record)
+    assert outcome.outcome == Outcome.OK, outcome.message
+    assert "went between gripper 1's fingers" in outcome.message
+    fingers = np.array(fingers_while_pushing)
+    assert len(fingers) and np.abs(fingers[:, 0]).max() < np.sin(np.deg2rad(25))    # across the grasp axis
+    assert distance(invert(cell.object_in_gripper("arm1")), executor.primitives[-1].gripper_after)[0] < 0.003
+    assert cell.gripper_status("arm1").max_force == pytest.approx(executor.settings.grip.hold_force)
 
 
 def _pusher_in_the_bracket_corner(bracket_run):
