@@ -2,8 +2,8 @@
 pusher's orientation at its start (the camera on the object's tags, the hands clear of each other) and a
 route there round the space kept free about the grasp.
 
-A translation pushes square onto a face round the grasp axis (or straddles gripper 1's fingers to move
-the object out along them); a rotation pushes across or along the fingers at a lever about the grasp
+A translation pushes square onto a face round the grasp axis (or, to move the object out along gripper
+1's fingers, straddles them or pushes between them: sideways.py); a rotation pushes across or along the fingers at a lever about the grasp
 axis; a level press pushes along the grasp axis to turn the object back about an axis across it.
 """
 from __future__ import annotations
@@ -27,11 +27,11 @@ from dmg_executor.push_points import (
     reasons,
     room_step,
     rotation_push,
-    straddle_push,
     translation_push,
 )
-from dmg_executor.routes import KeepOut, RouteError
+from dmg_executor.routes import RouteError
 from dmg_executor.run import Push, Run
+from dmg_executor.sideways import between_fingers, sideways_entry, straddle_point
 from dmg_executor.sight import distinct
 from dmg_executor.views import Occluders
 from dmg_planner.primitives import Primitive, PrimitiveKind
@@ -84,7 +84,7 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
                 problems.append(str(error))
         if motion[2] > s.tolerances.position and s.straddle.opening > 0.0:
             try:
-                pushes.append(_straddle_point(run, holder_in_object))
+                pushes.append(straddle_point(run, holder_in_object))
             except PushError as error:
                 problems.append(str(error))
         if s.carry.enabled:
@@ -135,28 +135,6 @@ def plan_push(run: Run, primitive: Primitive, obs: Observation) -> Push:
                 return max(candidates, key=lambda c: (c[1] > 0, round(np.rad2deg(min(c[0].contact.turn_limit,
                                                                                       abs(limited)))), c[1]))[0]
     raise PushError(reasons(problems))
-
-
-def _straddle_point(run: Run, holder_in_object: np.ndarray) -> PushPoint:
-    """The push that moves the object out along gripper 1's fingers: on its palm side, the pusher's tips
-    open either side of those fingers (`straddle_push`), on a face the pusher's fingers reach beside them
-    without meeting gripper 1's palm."""
-    s = run.settings
-    middle, rotation = holder_in_object[:3, 3], holder_in_object[:3, :3]
-    halves = 2 * s.gripper.tip_radius + s.straddle.margins
-    halves = halves[2 * halves - 2 * s.gripper.tip_radius <= s.straddle.opening + 1e-9]
-    if not len(halves):
-        widest = 2 * (s.gripper.tip_radius + s.straddle.margins[0])
-        raise PushError(f"a straddle push needs the pusher open {widest * 1000:.0f} mm "
-                        f"(straddle_opening {s.straddle.opening * 1000:.0f} mm)")
-    push = straddle_push(run.surface, middle, rotation[:, 2], rotation[:, 1], halves, s.straddle.twist,
-                         s.push.translation_slant)
-    depth = -float((push.point - middle) @ rotation[:, 2])     # towards the palm from the grasp's middle
-    room = s.gripper.finger_length - 2 * s.gripper.tip_radius - s.push.gap - s.approach.clearance   # (its finger beside the tip, radius tip_radius)
-    if depth > room:
-        raise PushError(f"the straddle push's face is {depth * 1000:.0f} mm towards gripper 1's palm (the pusher's "
-                        f"fingers fit up to {room * 1000:.0f} mm)")
-    return push
 
 
 def _carry_point(run: Run, obs: Observation, holder_in_object: np.ndarray, motion: np.ndarray) -> list[PushPoint]:
@@ -398,7 +376,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
         # The line leaves the kept-free space through its palm end: along it the pusher would come up along
         # gripper 1's hand and arm (sim: 300 mm, 12 s with the object unseen, then OBJECT_LOST); it comes in
         # across gripper 1's fingers instead, where it can push between them.
-        (push, tips_in_line), outside_h = _between(run, obs, push, point_h), None
+        (push, tips_in_line), outside_h = between_fingers(run, obs, push, point_h), None
     provisional = point - (1.5 * s.gripper.tip_radius + s.push.gap) * direction     # the reach depends on the orientation
     if push.spread:
         views, seen = run.sight.straddling_views(obs, provisional, direction, occluders)
@@ -456,7 +434,7 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
             raise RouteError(f"on the way in to the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) "
                              f"a fingertip would meet the object {early * 1000:.0f} mm before the push start")
     else:
-        outside_h = _sideways_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
+        outside_h = sideways_entry(run, apply(to_holder, start), to_holder[:3, :3] @ views[0], push.spread, box,
                                     invert(obs.object_in_holder))
     pusher_h = apply(to_holder, obs.pusher[:3, 3])
     waypoints = [apply(holder, w) for w in run.plan_route(pusher_h, outside_h, box, run.home_in(holder))]
@@ -465,46 +443,3 @@ def push_from(run: Run, obs: Observation, push: PushPoint, occluders: Occluders)
     others = distinct(views[1:][seen[1:] > 0], views[0], s.approach.other_views, s.approach.distinct_view)
     return Push(direction, direction_h, start, Route(waypoints + [start], orientations), lever, push, others,
                 blind=run.sight.modelled and seen[0] == 0), int(seen[0])
-
-
-def _between(run: Run, obs: Observation, push: PushPoint, point_h: np.ndarray) -> tuple[PushPoint, bool]:
-    """A push whose line meets the object from gripper 1's palm side, made between gripper 1's fingers: the
-    pusher's closed tips come in across those fingers along its own (`point_h`: the push point, holder
-    frame), side by side along the grasp axis where both fit between the fingers, else one behind the other
-    along the push (then they need a tip's width more room towards the palm). Translations only: the pusher
-    neither turns about the grasp axis nor slides along it there. The push, and whether its tips lie along
-    it. RouteError where `between.enabled` is off or the tips fit neither between the fingers nor short of
-    the palm."""
-    s = run.settings
-    refusal = (f"the push at {np.round(point_h * 1000, 1).tolist()} mm (holder frame) comes along the holding "
-               "gripper's hand from its palm side")
-    if (not s.between.enabled or run.campaign.leveling
-            or run.campaign.primitive.kind != PrimitiveKind.TRANSLATION):
-        raise RouteError(refusal)
-    tip = s.gripper.tip_radius
-    free = obs.opening / 2 - abs(float(point_h[0])) - s.fingertips.tip_clearance   # from the push line to a finger
-    if free < tip:
-        raise RouteError(f"{refusal}, and a fingertip of the pusher ({2 * tip * 1000:.0f} mm) does not fit between "
-                         f"its fingers ({obs.opening * 1000:.0f} mm apart)")
-    in_line = free < 2 * tip
-    room = s.gripper.finger_length - 2 * tip * (1 + in_line) - s.push.gap - s.approach.clearance
-    if -float(point_h[2]) > room:
-        raise RouteError(f"{refusal}, {-point_h[2] * 1000:.0f} mm towards its palm (the pusher's tips fit "
-                         f"between its fingers up to {room * 1000:.0f} mm)")
-    return replace(push, sideways=True), bool(in_line)
-
-
-def _sideways_entry(run: Run, start_h: np.ndarray, orientation_h: np.ndarray, spread: float, box: KeepOut,
-                    object_in_holder_inverse: np.ndarray) -> np.ndarray:
-    """Where (holder frame) a sideways push's last stretch begins: out of the kept-free space along the
-    pusher's fingers from its start, so that its tips (`spread` apart, 0 closed) come in either side of or
-    between gripper 1's fingers, clear of the object all the way (RouteError if not)."""
-    s = run.settings
-    fingers = orientation_h[:, 2]
-    length = box.exit_distance(start_h, -fingers) + s.approach.exit_margin
-    shells = fingertip_shells(orientation_h, s.gripper.tip_radius, s.fingertips.tip_clearance, spread)
-    along = start_h - np.linspace(0.0, length, 12)[:, None] * fingers
-    if run.surface.inside(apply(object_in_holder_inverse, (along[:, None, :] + shells[None]).reshape(-1, 3))).any():
-        raise RouteError(f"the pusher's fingertips would meet the object on their way in along its fingers to "
-                         f"{np.round(start_h * 1000, 1).tolist()} mm (holder frame)")
-    return start_h - length * fingers
