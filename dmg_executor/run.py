@@ -248,13 +248,15 @@ class Run:
         of it: a run that began next to the object ends there), turned to `orientation` there and
         its camera on the object on the way (RouteError if there is no route). A pusher inside that
         space on a push's line (its start in a hollow of the object, the pusher on its way in) first
-        backs out along the line, the way it came (sim, a stepped block: stopped on that line, unseen,
-        44 mm inside the space, no route out - the run ended LIMIT_VIOLATION)."""
+        backs out the way it came: along the line (sim, a stepped block: stopped on that line, unseen,
+        44 mm inside the space, no route out - the run ended LIMIT_VIOLATION), or for a sideways push
+        along its own fingers (back along the line it would go through gripper 1's hand)."""
         box = self.keep_out(obs)
         start = apply(invert(obs.holder), obs.pusher[:3, 3])
         goal = box.nearest_outside(goal)
         back = []
-        along = self.push.local_direction if self.push is not None else np.zeros(3)
+        along = (np.zeros(3) if self.push is None else invert(obs.holder)[:3, :3] @ obs.pusher[:3, 2]
+                 if self.push.sideways else self.push.local_direction)
         if box.contains(start)[0] and np.any(along):
             start = start - (box.exit_distance(start, -along) + self.settings.approach.exit_margin) * along
             back = [apply(obs.holder, start)]

@@ -76,6 +76,19 @@ def test_the_pusher_leaves_a_push_between_the_fingers_along_its_own_fingers():
     assert np.abs(np.array(path)[:, 0]).max() < 1e-6                    # never towards gripper 1's fingers
 
 
+def test_a_push_between_the_fingers_given_up_at_its_start_backs_out_along_the_pushers_fingers_first():
+    """Back along the push's line from between gripper 1's fingers would take the pusher through gripper 1's hand."""
+    cell, run, _ = planned()
+    cell.pusher[:3, 3], cell.pusher[:3, :3] = run.push.start, run.push.route.orientations[-1]
+    obs = cell.observe()
+    start = apply(invert(cell.holder), cell.pusher[:3, 3])
+    fingers = invert(cell.holder)[:3, :3] @ cell.pusher[:3, 2]
+    run.head_home(obs)
+    out = apply(invert(cell.holder), run.pilot.route.waypoints[0]) - start
+    assert out @ fingers < -0.999 * np.linalg.norm(out)                 # out the way it came in ...
+    assert not run.keep_out(obs).contains(start + out)[0]                # ... to outside the space kept free
+
+
 def test_where_two_tips_side_by_side_do_not_fit_between_the_fingers_they_come_one_behind_the_other():
     cell = box_cell()
     cell.opening = 0.030      # 15 mm from the push line to a finger: one tip (16 mm across) with 2 mm clear, not two
