@@ -118,13 +118,22 @@ def seen(obs: Observation, object_in_holder: np.ndarray) -> Observation:
     return replace(obs, object_in_holder=object_in_holder, object_time=obs.time)
 
 
+def find_translation_push(shift_in_object, cell: SyntheticCell | None = None, **overrides
+                        ) -> tuple[SyntheticCell, Run, Command | Transition]:
+    """The box cell (by default a fresh one) with a run of one translation by `shift_in_object`, its pose
+    held and measured, and what FindContact answers first."""
+    cell = cell or box_cell()
+    run = box_run([translation(shift_in_object)], cell, **overrides)
+    obs = cell.observe()
+    run.held.take(obs)
+    run.campaign.measure(obs)
+    return cell, run, FindContact().tick(run, obs)
+
+
 def planned_translation(shift_in_object=(0.010, 0.0, 0.0)) -> tuple[SyntheticCell, Run]:
     """The box cell with a run of one translation whose first push FindContact has just planned."""
-    cell = box_cell()
-    run = box_run([translation(shift_in_object)], cell)
-    obs = cell.observe()
-    run.campaign.measure(obs)
-    assert isinstance(FindContact().tick(run, obs).to, Approach)
+    cell, run, outcome = find_translation_push(shift_in_object)
+    assert isinstance(outcome.to, Approach)
     return cell, run
 
 

@@ -15,19 +15,14 @@ from dmg_executor.states.base import Transition
 from dmg_executor.states.execute import Execute
 from dmg_executor.states.find_contact import FindContact
 from dmg_executor.states.leave import Leave
-from synthetic import box_cell, box_run, translation
+from synthetic import box_cell, find_translation_push
 
 ONLY_BETWEEN = {"straddle.opening": 0.0, "carry.enabled": False}
 OUT_ALONG_THE_FINGERS = (0.0, -0.010, 0.0)   # object y is gripper 1's z: the box moves 10 mm towards the fingertips
 
 
 def planned(cell=None, shift=OUT_ALONG_THE_FINGERS, **overrides):
-    cell = cell or box_cell()
-    run = box_run([translation(shift)], cell, **{**ONLY_BETWEEN, **overrides})
-    obs = cell.observe()
-    run.held.take(obs)
-    run.campaign.measure(obs)
-    return cell, run, FindContact().tick(run, obs)
+    return find_translation_push(shift, cell, **{**ONLY_BETWEEN, **overrides})
 
 
 def test_the_palm_side_face_is_pushed_between_the_fingers_by_the_closed_tips_coming_in_across_them():

@@ -12,21 +12,15 @@ from dmg_executor.grip import GRAVITY
 from dmg_executor.states.approach import Approach
 from dmg_executor.states.base import Transition
 from dmg_executor.states.execute import Execute, Phase
-from dmg_executor.states.find_contact import FindContact
 from dmg_executor.states.leave import Leave
-from synthetic import box_cell, box_run, pose, translation
+from synthetic import box_cell, find_translation_push
 
 NO_STRADDLE = {"straddle.opening": 0.0, "between.enabled": False}   # (the box takes either: only the carry is left)
 DOWN_THE_FINGERS = (0.0, -0.010, 0.0)     # the grasp 10 mm up the box (object y is gripper 1's z): the box goes down
 
 
 def planned(shift=DOWN_THE_FINGERS, cell=None, **overrides):
-    cell = cell or box_cell()
-    run = box_run([translation(shift)], cell, **{**NO_STRADDLE, **overrides})
-    obs = cell.observe()
-    run.held.take(obs)
-    run.campaign.measure(obs)
-    return cell, run, FindContact().tick(run, obs)
+    return find_translation_push(shift, cell, **{**NO_STRADDLE, **overrides})
 
 
 def test_a_translation_down_the_fingers_is_carried_from_the_face_below():
