@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.special import expit
 
+from dmg_common.config import parameter_defaults
 from dmg_common.transforms import distance, from_rotation, invert
 from dmg_perception.held import HeldShape
 from dmg_perception.tags import detector, tag_corners, tag_pose
@@ -66,13 +67,32 @@ def _matrix(rvec, tvec) -> np.ndarray:
     return from_rotation(cv2.Rodrigues(np.asarray(rvec, float))[0], np.ravel(tvec))
 
 
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """The estimator's tunables, as config/perception.yaml names them (angles there in degrees)."""
+
+    inlier_threshold: float        # px RMS
+    pixel_noise: float             # px
+    prior_turn: float              # rad
+    held_tilt: float               # rad
+
+    @classmethod
+    def from_values(cls, values: dict) -> EstimatorSettings:
+        return cls(float(values["inlier_threshold"]), float(values["pixel_noise"]),
+                   float(np.deg2rad(values["prior_turn"])), float(np.deg2rad(values["held_tilt"])))
+
+    @classmethod
+    def defaults(cls) -> EstimatorSettings:
+        return cls.from_values(parameter_defaults("perception"))
+
+
 class ObjectPoseEstimator:
-    def __init__(self, objects: list[ObjectModel], inlier_threshold: float = 3.0, pixel_noise: float = 0.3,
-                 prior_turn: float = np.deg2rad(3.0), held_tilt: float = np.deg2rad(10.0)):
-        self.inlier_threshold = inlier_threshold
-        self.pixel_noise = pixel_noise
-        self.prior_turn = prior_turn     # rad: the least rotation uncertainty of a last pose that settles a mirror
-        self.held_tilt = held_tilt       # rad: a mirror this much less square in the grip is not the held object (0: off)
+    def __init__(self, objects: list[ObjectModel], settings: EstimatorSettings | None = None):
+        settings = settings or EstimatorSettings.defaults()
+        self.inlier_threshold = settings.inlier_threshold
+        self.pixel_noise = settings.pixel_noise
+        self.prior_turn = settings.prior_turn     # rad: the least rotation uncertainty of a last pose that settles a mirror
+        self.held_tilt = settings.held_tilt       # rad: a mirror this much less square in the grip is not the held object (0: off)
         self.detector = detector()
         self.models = {model.name: model for model in objects}
         self.held_shapes: dict[str, HeldShape | None] = {}     # built when first needed (None: its mesh unreadable)

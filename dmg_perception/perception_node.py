@@ -31,7 +31,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from dmg_common.ros.geometry_messages import pose_message, seconds, transform_from_pose
 from dmg_common.ros.node_main import run_node
 from dmg_common.ros.parameters import declare_from_config
-from dmg_perception.estimator import EstimationError, ObjectPoseEstimator
+from dmg_perception.estimator import EstimationError, EstimatorSettings, ObjectPoseEstimator
 from dmg_perception.images import ImageError, grey_image
 from dmg_perception.tracker import FrameResult, Tracker, TrackingState
 from dmg_planner.objects import ObjectError, load_object, object_names
@@ -61,8 +61,7 @@ class PerceptionNode(Node):
                 if name in named:     # asked for by name: the node cannot do its job without it
                     raise
                 self.get_logger().error(f"{error}; perception goes on without it")
-        estimator = ObjectPoseEstimator(models, values["inlier_threshold"], values["pixel_noise"],
-                                        np.deg2rad(values["prior_turn"]), np.deg2rad(values["held_tilt"]))
+        estimator = ObjectPoseEstimator(models, EstimatorSettings.from_values(values))
         self.tracker = Tracker(estimator, values["lost_timeout"], values["pose_tolerance"], values["object"])
         self.lock = threading.Lock()            # guards the tracker's buffers and the pending image
         self.pending: Image | None = None
