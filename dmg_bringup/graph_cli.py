@@ -89,10 +89,10 @@ def parse_grasp(graph: DexterousManipulationGraph, text: str, what: str, finger:
 
 
 def _options(args: argparse.Namespace) -> SearchOptions:
-    from dmg_planner.search import SearchOptions
+    from dmg_planner.search import PENALTIES, SearchOptions
 
     options = SearchOptions(principal_finger=args.principal)
-    for name in ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty"):
+    for name in PENALTIES:
         if getattr(args, name) is not None:
             options = replace(options, **{name: getattr(args, name)})
     return options
@@ -229,7 +229,9 @@ def _add_search(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--start", required=required, help="x,y,z,angle_deg contact or x,y,z,qx,qy,qz,qw[,opening] pose")
     p.add_argument("--goal", required=required, help="same forms as --start")
     p.add_argument("--principal", type=int, default=-1, choices=[-1, 0, 1], help="principal finger (-1 = cheaper of both)")
-    for name in ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty"):
+    from dmg_planner.search import PENALTIES
+
+    for name in PENALTIES:
         p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=float)
 
 

@@ -11,9 +11,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from dmg_common.ros.geometry_messages import pose_message
 from dmg_planner.graph import GraphParameters
 from dmg_planner.library import LoadedObject, ObjectState
-from dmg_planner.search import GripperPose, PlanResult, PlanStatus
+from dmg_planner.search import PENALTIES, GripperPose, PlanResult, PlanStatus
 
-PENALTIES = ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty")
 # tab10-like palette for components
 PALETTE = np.array([[0.12, 0.47, 0.71], [1.0, 0.5, 0.05], [0.17, 0.63, 0.17], [0.84, 0.15, 0.16], [0.58, 0.4, 0.74],
                     [0.55, 0.34, 0.29], [0.89, 0.47, 0.76], [0.5, 0.5, 0.5], [0.74, 0.74, 0.13], [0.09, 0.75, 0.81]])

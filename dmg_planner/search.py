@@ -13,7 +13,8 @@ layer) of the principal's C_DMG component:
   * translation: to an adjacent node at the same angle bin, allowed when both nodes admit
     it and the secondary finger stays in a node of its start component C_s at that angle;
     cost = distance * (1 + pull_penalty if the step pulls the object out of the gripper, i.e.
-    the second gripper would have to pull) + opening_change_penalty * |change of opening|;
+    the second gripper would have to pull, + unpushable_penalty if the pusher's fingertip finds no
+    room at the face it would push) + opening_change_penalty * |change of opening|;
   * rotation: entering layer 1 costs rotation_penalty, each angle step inside it costs
     rotation_penalty * step / pi (so a rotation of r costs rotation_penalty * (1 + |r|/pi)),
     plus arm_collision_penalty when the finger turns more than 90 deg away from its start
@@ -44,6 +45,8 @@ NORMAL_TOLERANCE = np.deg2rad(45.0)
 AXIS_TOLERANCE = np.deg2rad(15.0)
 QUATERNION_TOLERANCE = 1e-3
 ZERO_COST = 1e-12  # csgraph ignores explicit zero weights; free edges get this instead
+# The costs a request may set (PlanRepositioning's SearchOptions, `dmg graph plan`); the rest is configuration.
+PENALTIES = ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty", "unpushable_penalty")
 
 
 class PlanStatus(IntEnum):
@@ -67,12 +70,14 @@ class SearchOptions:
     pull_penalty: float = 1.0
     arm_collision_penalty: float = 0.05
     merge_tolerance: float = 0.0        # 0 = half the graph's seed resolution
+    unpushable_penalty: float = 10.0
+    pusher_tip_radius: float = 0.008    # m, the pushing gripper's fingertip (a sphere)
+    pusher_clearance: float = 0.002     # m a fingertip needs all round beside the face it pushes
 
     def validate(self) -> None:
         if self.principal_finger not in (-1, 0, 1):
             raise ValueError(f"principal_finger must be -1, 0 or 1, not {self.principal_finger}")
-        for name in ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty",
-                     "merge_tolerance"):
+        for name in (*PENALTIES, "merge_tolerance", "pusher_tip_radius", "pusher_clearance"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} = {value}: must be finite and >= 0")
@@ -371,6 +376,7 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
     secondary_ok = np.any(admits & slot_ok[:, :, None], axis=1) & ok_vertex[:, None]
     valid = graph.node_angles[nodes] & secondary_ok
     openings = np.linalg.norm(secondaries - positions, axis=1)
+    middles = (positions + secondaries) / 2
 
     size = len(nodes) * count
     rows, cols, costs = [], [], []
@@ -390,10 +396,13 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
         length = np.take(edge_length, edge_id)
         source = np.take(a, edge_id) * count + angle_bin
         toward_palm = np.einsum("ij,ij->i", step, np.take(flat_directions, source, axis=0)) > PULL_COSINE * length
+        # (a pull is pushed from the palm side, round gripper 1's fingers: pull_penalty says what it costs)
+        unpushable = (~toward_palm & ~np.take(pushable(graph, middles[a], edge_step, options), edge_id)
+                      if options.unpushable_penalty > 0 else np.zeros(len(edge_id), bool))
         rows.append(source)
         cols.append(np.take(b, edge_id) * count + angle_bin)
-        costs.append(length * (1.0 + options.pull_penalty * toward_palm) + ZERO_COST
-                     + options.opening_change_penalty * np.take(edge_opening, edge_id))
+        costs.append(length * (1.0 + options.pull_penalty * toward_palm + options.unpushable_penalty * unpushable)
+                     + ZERO_COST + options.opening_change_penalty * np.take(edge_opening, edge_id))
     # Rotations: enter layer 1, step one bin either way within the valid set, leave for free.
     k, angle_bin = np.nonzero(valid)
     state = k * count + angle_bin
@@ -424,6 +433,33 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
     return StateGraph(nodes=nodes, valid=valid, secondaries=secondaries, matrix=matrix, directions=directions,
                       turn_slots=slot[turn_first:], turn_from=np.stack([np.concatenate(turn_k), np.concatenate(turn_bin)]),
                       turn_to=np.concatenate(turn_to))
+
+
+def pushable(graph: DexterousManipulationGraph, middles: np.ndarray, steps: np.ndarray,
+              options: SearchOptions) -> np.ndarray:
+    """(n,) Can the second gripper's fingertip push the object for a translation whose principal contact
+    moves by `steps` (object frame) from grasps whose middles are `middles`? The object moves by -step
+    relative to the gripper, so the pusher meets it on the +step side, on the line through the grasp's
+    middle. A fingertip touching the face there, set back a tip radius along the line, must have
+    `pusher_clearance` all round (a step's riser lower than the tip, a slot narrower than it, is no face
+    for it). A line that misses the object beyond the middle (a hollow there) is left to the executor."""
+    import open3d as o3d
+
+    ahead = steps / np.maximum(np.linalg.norm(steps, axis=1, keepdims=True), 1e-12)
+    origins = middles + _reach(graph) * ahead
+    scene = graph.scene()
+    cast = scene.cast_rays(o3d.core.Tensor(np.concatenate([origins, -ahead], axis=1).astype(np.float32)))
+    distance = cast["t_hit"].numpy().astype(np.float64)
+    normals = cast["primitive_normals"].numpy().astype(np.float64)
+    hit = np.isfinite(distance)
+    faces = origins - np.where(hit, distance, 0.0)[:, None] * ahead
+    beyond = hit & (np.einsum("ij,ij->i", faces - middles, ahead) > 0.0)
+    radius = options.pusher_tip_radius
+    normals *= np.where(np.einsum("ij,ij->i", normals, ahead) < 0.0, -1.0, 1.0)[:, None]   # outwards, towards the tip
+    centres = o3d.core.Tensor((faces + radius * normals + radius * ahead).astype(np.float32))
+    room = scene.compute_distance(centres).numpy().astype(np.float64)
+    inside = scene.compute_occupancy(centres).numpy() > 0.5
+    return ~beyond | ((room >= radius + options.pusher_clearance - 1e-6) & ~inside)
 
 
 def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,

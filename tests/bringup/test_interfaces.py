@@ -62,7 +62,7 @@ def test_plan_repositioning_round_trip(servers):
     assert (echoed["start_opening"], echoed["goal_opening"]) == (0.04, 0.06)
     assert echoed["options"] == {"principal_finger": 1, "rotation_penalty": 0.5,
                                  "opening_change_penalty": -1.0, "pull_penalty": 2.0,
-                                 "arm_collision_penalty": -1.0}
+                                 "arm_collision_penalty": -1.0, "unpushable_penalty": -1.0}
     response = yaml.safe_load(result.stdout.split("response:\n", 1)[1])
     assert response["plan"]["goal_pose"]["position"]["y"] == 0.02
 
