@@ -94,7 +94,9 @@ class Launcher:
         self.log = log or sys.stdout
         self.processes: dict[str, subprocess.Popen] = {}
         self.param_dir = tempfile.TemporaryDirectory(prefix="dmg_up_") if any(s.parameters for s in specs) else None
-        self.stopping = threading.Event()
+        # A plain flag, not a threading.Event: the signal handler sets it, and Event.set() from a handler deadlocks
+        # when the signal lands while the main thread holds the Event's lock inside Event.wait().
+        self.stop_requested = False
         self.width = max(len(s.name) for s in specs)
 
     def _command(self, spec: NodeSpec) -> list[str]:
@@ -134,10 +136,14 @@ class Launcher:
                 return spec.name, code
         return None
 
+    def request_stop(self, *_) -> None:
+        """Signal handler: ask `wait` to return (lock-free, so safe at any point of the main thread)."""
+        self.stop_requested = True
+
     def wait(self) -> int:
         """Run until a signal or until a required node exits; return the exit code."""
         code = 0
-        while not self.stopping.is_set():
+        while not self.stop_requested:
             dead = self.dead_required()
             if dead:
                 print(f"[dmg up] required node {dead[0]} exited with {dead[1]}; stopping all", file=self.log,
@@ -146,7 +152,7 @@ class Launcher:
                 break
             if all(p.poll() is not None for p in self.processes.values()):
                 break
-            self.stopping.wait(0.1)
+            time.sleep(0.1)
         return code
 
     def stop(self) -> None:
@@ -179,7 +185,7 @@ def up(args: argparse.Namespace) -> int:
         return 2
     launcher = Launcher(specs, grace=args.grace)
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: launcher.stopping.set())
+        signal.signal(sig, launcher.request_stop)
     launcher.start()
     try:
         code = launcher.wait()
