@@ -22,7 +22,8 @@ from dmg_planner.objects import ObjectError, load_object, object_names
 
 if TYPE_CHECKING:  # the core needs open3d; it is imported when a verb runs, keeping `dmg` quick to start
     from dmg_planner.graph import DexterousManipulationGraph
-    from dmg_planner.search import GripperPose, PlanResult, SearchOptions
+    from dmg_planner.search import GripperPose, PlanResult
+    from dmg_planner.search_options import SearchOptions
 
 
 class UsageError(Exception):
@@ -89,7 +90,7 @@ def parse_grasp(graph: DexterousManipulationGraph, text: str, what: str, finger:
 
 
 def _options(args: argparse.Namespace) -> SearchOptions:
-    from dmg_planner.search import PENALTIES, SearchOptions
+    from dmg_planner.search_options import PENALTIES, SearchOptions
 
     options = SearchOptions(principal_finger=args.principal)
     for name in PENALTIES:
@@ -229,7 +230,7 @@ def _add_search(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--start", required=required, help="x,y,z,angle_deg contact or x,y,z,qx,qy,qz,qw[,opening] pose")
     p.add_argument("--goal", required=required, help="same forms as --start")
     p.add_argument("--principal", type=int, default=-1, choices=[-1, 0, 1], help="principal finger (-1 = cheaper of both)")
-    from dmg_planner.search import PENALTIES
+    from dmg_planner.search_options import PENALTIES
 
     for name in PENALTIES:
         p.add_argument(f"--{name.replace('_', '-')}", dest=name, type=float)

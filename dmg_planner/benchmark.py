@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from dmg_planner.graph import GraphParameters, build_graph
 from dmg_planner.manipulability import manipulability_matrix
 from dmg_planner.objects import load_object
-from dmg_planner.search import GripperPose, SearchOptions, plan
+from dmg_planner.search import GripperPose, plan
+from dmg_planner.search_options import SearchOptions
 
 REPEATS = 3
 

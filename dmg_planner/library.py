@@ -23,7 +23,8 @@ from scipy.spatial.transform import Rotation
 from dmg_planner.graph import DexterousManipulationGraph, GraphParameters, build_graph
 from dmg_planner.manipulability import ManipulabilityMatrix, manipulability_matrix, regrasp_hint
 from dmg_planner.objects import load_object
-from dmg_planner.search import GripperPose, PlanResult, PlanStatus, SearchOptions, plan
+from dmg_planner.search import GripperPose, PlanResult, plan
+from dmg_planner.search_options import PlanStatus, SearchOptions
 from dmg_planner.shape import UNIT_SCALE, ShapeError, load_shape
 from dmg_planner.storage import GraphCache, cache_key
 

@@ -20,8 +20,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial.transform import Rotation
 
 from dmg_planner.graph import DexterousManipulationGraph
-from dmg_planner.search import (GraspError, GraspFault, GripperPose, PlanResult, SearchOptions, locate_grasps, plan,
-                               resolve_grasp, state_graph)
+from dmg_planner.search import GraspError, GraspFault, GripperPose, PlanResult, locate_grasps, plan, resolve_grasp, state_graph
+from dmg_planner.search_options import SearchOptions
 
 
 @dataclass

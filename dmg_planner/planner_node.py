@@ -35,7 +35,7 @@ from dmg_common.ros.waiting import wait_until
 from dmg_planner import ros_conversions as rc
 from dmg_planner.library import LoadStatus, ObjectLibrary, ObjectState, options_from_parameters
 from dmg_planner.objects import object_names
-from dmg_planner.search import PlanStatus
+from dmg_planner.search_options import PlanStatus
 
 
 def main(argv: list[str] | None = None) -> int:

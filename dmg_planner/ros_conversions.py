@@ -11,7 +11,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from dmg_common.ros.geometry_messages import pose_message
 from dmg_planner.graph import GraphParameters
 from dmg_planner.library import LoadedObject, ObjectState
-from dmg_planner.search import PENALTIES, GripperPose, PlanResult, PlanStatus
+from dmg_planner.search import GripperPose, PlanResult
+from dmg_planner.search_options import PENALTIES, PlanStatus
 
 # tab10-like palette for components
 PALETTE = np.array([[0.12, 0.47, 0.71], [1.0, 0.5, 0.05], [0.17, 0.63, 0.17], [0.84, 0.15, 0.16], [0.58, 0.4, 0.74],

@@ -8,7 +8,8 @@ from dmg_planner.graph import GraphParameters, build_graph
 from dmg_planner.manipulability import manipulability_matrix, regrasp_hint, save_matrix
 from dmg_planner.objects import load_object
 from dmg_planner.primitives import PrimitiveKind
-from dmg_planner.search import GripperPose, PlanStatus, SearchOptions, grasp_pose, plan
+from dmg_planner.search import GripperPose, grasp_pose, plan
+from dmg_planner.search_options import PlanStatus, SearchOptions
 from dmg_planner.storage import cache_key, load_graph, save_graph
 from scipy.spatial.transform import Rotation
 

@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from dmg_planner.graph import GraphParameters, build_graph
 from dmg_planner.objects import Box, box_union_mesh
-from dmg_planner.search import SearchOptions, grasp_pose, plan, pushable
+from dmg_planner.search import grasp_pose, plan, pushable
+from dmg_planner.search_options import SearchOptions
 from dmg_planner.shape import shape_from_mesh
 
 
