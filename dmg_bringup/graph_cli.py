@@ -43,7 +43,7 @@ def _parameters(args: argparse.Namespace, default_seed: float) -> GraphParameter
 
 def load_source(args: argparse.Namespace) -> DexterousManipulationGraph:
     """Graph from an object name, a mesh/point cloud, or a saved graph."""
-    from dmg_planner.graph import build_graph
+    from dmg_planner.graph import GraphError, build_graph
     from dmg_planner.shape import ShapeError, load_shape
     from dmg_planner.storage import GraphFileError, load_graph
 
@@ -68,7 +68,10 @@ def load_source(args: argparse.Namespace) -> DexterousManipulationGraph:
         shape = load_shape(path, units, parameters.voxel_resolution)
     except ShapeError as error:
         raise UsageError(str(error)) from error
-    return build_graph(shape, parameters)
+    try:
+        return build_graph(shape, parameters)
+    except GraphError as error:
+        raise UsageError(f"{source}: {error}") from error
 
 
 def parse_grasp(graph: DexterousManipulationGraph, text: str, what: str, finger: int) -> GripperPose:

@@ -34,7 +34,11 @@ from dmg_planner.supervoxels import vccs
 FORMAT_VERSION = 1
 # Bump when a code change alters the graphs built from the same input: it is part of the
 # cache key, so no planner serves a graph built by older code.
-ALGORITHM_VERSION = 3
+ALGORITHM_VERSION = 4
+
+
+class GraphError(ValueError):
+    """A surface that gives no graph to plan on; the message names the stage that left nothing."""
 
 
 @dataclass
@@ -272,6 +276,8 @@ def build_graph(shape: Shape, parameters: GraphParameters) -> DexterousManipulat
     node_angles = runs[node_vertex] == node_run[:, None]
     node_edges = _node_edges(edges, node_vertex, node_run, node_angles, runs)
     n = len(node_vertex)
+    if n == 0:
+        raise GraphError(_why_no_nodes(count, int(keep.sum()), int((~dead[alive]).sum()), parameters))
     adjacency = sparse.coo_matrix((np.ones(len(node_edges)), node_edges.T), shape=(n, n))
     _, node_component = connected_components(adjacency, directed=False)
     lap("nodes")
@@ -283,6 +289,20 @@ def build_graph(shape: Shape, parameters: GraphParameters) -> DexterousManipulat
         node_component=node_component, node_edges=node_edges,
         voxel_centers=segmentation.voxels.centers, voxel_labels=segmentation.voxel_labels,
         timings=timings, supervoxel_count=count, graph_component_count=int(components.max(initial=-1) + 1))
+
+
+def _why_no_nodes(supervoxels: int, flat_edges: int, fingered: int, p: GraphParameters) -> str:
+    """What left a graph without a node: the surface's curvature, the finger's room, or neither alone."""
+    if flat_edges == 0:
+        return (f"no DMG node: every one of the {supervoxels} supervoxels lost its neighbours at delta = {p.delta:g} "
+                f"(neighbouring normals differ more than that: the surface is curved everywhere at a seed resolution "
+                f"of {p.seed_resolution * 1000:g} mm); raise delta or lower seed_resolution")
+    if fingered == 0:
+        return (f"no DMG node: no supervoxel with a flat neighbour leaves room for a finger ({p.finger_length * 1000:g} "
+                f"mm long, {p.finger_width * 1000:g} mm wide) at any of the {p.angle_count} angles: the finger "
+                f"would touch the object everywhere")
+    return (f"no DMG node: the {fingered} supervoxels with room for a finger have no neighbour within delta = "
+            f"{p.delta:g} that has room too")
 
 
 def _components(edges: np.ndarray, count: int) -> np.ndarray:

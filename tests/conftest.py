@@ -79,6 +79,16 @@ def dmg_in_process(capsys: pytest.CaptureFixture) -> Callable[..., subprocess.Co
     return run
 
 
+def sphere_mesh(path: Path, radius: float = 0.03) -> Path:
+    """An STL sphere (open3d's): curved everywhere, the surface a DMG has no node on."""
+    import open3d as o3d
+
+    mesh = o3d.geometry.TriangleMesh.create_sphere(radius, 40)
+    mesh.compute_triangle_normals()
+    assert o3d.io.write_triangle_mesh(str(path), mesh)
+    return path
+
+
 def helper_command(script: str, *args: str) -> list[str]:
     return [sys.executable, str(HELPERS / script), *args]
 

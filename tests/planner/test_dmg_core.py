@@ -4,14 +4,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dmg_planner.graph import GraphParameters, build_graph
+from dmg_planner.graph import GraphError, GraphParameters, build_graph
 from dmg_planner.manipulability import manipulability_matrix, regrasp_hint, save_matrix
 from dmg_planner.objects import load_object
 from dmg_planner.primitives import PrimitiveKind
 from dmg_planner.search import GripperPose, grasp_pose, plan
 from dmg_planner.search_options import PlanStatus, SearchOptions
+from dmg_planner.shape import load_shape
 from dmg_planner.storage import cache_key, load_graph, save_graph
 from scipy.spatial.transform import Rotation
+
+from conftest import sphere_mesh
 
 
 def build(name: str, **overrides):
@@ -317,3 +320,14 @@ def test_every_primitive_carries_the_gripper_pose_after_it_and_the_last_is_the_g
     resolved = resolve_grasp(graph, goal, result.principal_finger, "goal")
     assert np.allclose(previous[:3, 3], (resolved.contact + resolved.secondary) / 2, atol=1e-6)   # float32 ray casts
     assert np.allclose(previous[:3, 2], -resolved.finger_direction, atol=1e-6)
+
+
+def test_a_surface_curved_everywhere_is_an_error_naming_the_cause(tmp_path):
+    """A sphere: neighbouring normals differ more than delta everywhere, so no node; the error says so and how
+    to change it, and with a delta the curvature passes it builds (no silent empty graph either way)."""
+    parameters = GraphParameters()
+    shape = load_shape(sphere_mesh(tmp_path / "ball.stl"), "m", parameters.voxel_resolution)
+    with pytest.raises(GraphError, match=r"every one of the \d+ supervoxels lost its neighbours at delta = 0.07"):
+        build_graph(shape, parameters)
+    loose = GraphParameters(delta=0.3)
+    assert len(build_graph(shape, loose).node_vertex) > 0

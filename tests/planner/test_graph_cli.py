@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import dmg
+from conftest import dmg, sphere_mesh
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +63,8 @@ def test_bad_input_is_a_clear_error(tmp_path, dmg_in_process):
                         (("graph", "build", "box", "--seed-resolution", "0.0005"), "twice"),
                         (("graph", "plan", "box", "--start=1,2", "--goal=0,0,0.02,0"), "x,y,z,angle_deg"),
                         (("graph", "plan", "box", "--start=0,0,0.5,0", "--goal=0,0,0.02,0"), "not on the object"),
-                        (("graph", "build", str(tmp_path / "missing.npz")), "")]:
+                        (("graph", "build", str(tmp_path / "missing.npz")), ""),
+                        (("graph", "build", str(sphere_mesh(tmp_path / "ball.stl"))), "curved everywhere")]:
         result = dmg_in_process(*args)
         assert result.returncode == 2, (args, result.stdout, result.stderr)
         assert "error:" in result.stderr and words in result.stderr, result.stderr

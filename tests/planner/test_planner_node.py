@@ -9,7 +9,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from conftest import DMG, Processes, side_by_side
+from conftest import DMG, Processes, side_by_side, sphere_mesh
 
 pytestmark = pytest.mark.ros
 
@@ -262,6 +262,8 @@ def test_load_object_errors_then_a_new_object_is_planned_on(planner, tmp_path):
         (dict(object_id="negative", mesh_path=mesh, parameters=graph_parameters(delta=-1.0)), codes.BAD_REQUEST, "delta"),
         (dict(object_id="plug", mesh_path=mesh), codes.ALREADY_LOADED, "already loaded"),
         (dict(object_id="tiny", mesh_path=mesh, mesh_units="mm"), codes.MESH_ERROR, "units"),
+        (dict(object_id="ball", mesh_path=str(sphere_mesh(tmp_path / "ball.stl")), wait=True), codes.BUILD_FAILED,
+         "no DMG node: every one of the"),
     ]:
         result = client.load(**fields)
         assert not result.success and result.error_code == code and words in result.message, (fields, result.message)
