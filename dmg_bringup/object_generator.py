@@ -294,9 +294,8 @@ def check_hold(model: ObjectModel, sim, settings: GeneratorSettings) -> HoldChec
     """The checks of the default grasp against the gripper of `sim` (a SimConfig), in gripper 1's
     grasp frame (x grasp axis, z along the fingers away from the palm, origin between the tips)."""
     from dmg_sim_bridge.cell import default_grasp
-    from dmg_sim_bridge.gripper import FINGER_HALF_SECTION
 
-    gripper = sim.gripper
+    gripper = sim.gripper.geometry
     pose = default_grasp(model, gripper.max_opening)
     rotation, offset = pose[:3, :3], pose[:3, 3]
     centres = np.array([p.center for p in model.parts]) @ rotation.T + offset
@@ -326,8 +325,9 @@ def check_hold(model: ObjectModel, sim, settings: GeneratorSettings) -> HoldChec
         gaps = _box_distances(lows, highs, tip)
         for k in np.flatnonzero(gaps < radius - PENETRATION):
             raise Rejected(f"fingertip {finger} would press into part {k} beside the grasped face")
-        body_low = np.array([tip[0] - FINGER_HALF_SECTION[0], -FINGER_HALF_SECTION[1], -(length - radius)])
-        body_high = np.array([tip[0] + FINGER_HALF_SECTION[0], FINGER_HALF_SECTION[1], -radius])
+        half = np.array([gripper.finger_thickness / 2, gripper.finger_width / 2])
+        body_low = np.array([tip[0] - half[0], -half[1], -(length - radius)])
+        body_high = np.array([tip[0] + half[0], half[1], -radius])
         hits = np.all((lows < body_high + settings.finger_clearance) & (highs > body_low - settings.finger_clearance), axis=1)
         for k in np.flatnonzero(hits):
             raise Rejected(f"part {k} would run into finger {finger} between the tip and the palm "
@@ -343,7 +343,7 @@ def check_hold(model: ObjectModel, sim, settings: GeneratorSettings) -> HoldChec
     centre_of_mass = volumes @ centres / volumes.sum()
     gravity = sim.home["arm1"][:3, :3].T @ np.array([0.0, 0.0, -GRAVITY * model.mass])
     torque = abs(float(np.cross(centre_of_mass, gravity)[0]))
-    holds = 2 * gripper.max_force * gripper.friction[1]
+    holds = 2 * sim.gripper.max_force * sim.gripper.friction[1]
     if torque > settings.grip_torque_share * holds:
         raise Rejected(f"its weight turns it about the grasp axis with {torque:.3f} N m; the grip holds {holds:.3f} N m "
                        f"by torsional friction (at most {settings.grip_torque_share:.0%} of it used)")
@@ -419,8 +419,8 @@ def draw_object(rng: np.random.Generator, name: str, directory: Path, tag_ids: l
     # tags on +z (at least as many as on -z) give the same default grasp: +z to the camera.
     probe = ObjectModel(name, directory, "mesh.stl", "m", 1.0, 1.0, boxes,
                         [AprilTag(0, tag_size, np.array([0.0, 0.0, highs[:, 2].max()]), np.zeros(3))])
-    grasp = default_grasp(probe, sim.gripper.max_opening)
-    palm = (grasp[2], settings.tag_wrist_clearance - sim.gripper.finger_length)
+    grasp = default_grasp(probe, sim.gripper.geometry.max_opening)
+    palm = (grasp[2], settings.tag_wrist_clearance - sim.gripper.geometry.finger_length)
     sizes = np.arange(tag_size, settings.tag_sizes[0] - 1e-9, -settings.resolution)
     for size in sizes:
         front = choose_tags(tag_spots(lows, highs, 1, size, settings, palm), settings.tags_per_side, size, settings)
@@ -438,7 +438,7 @@ def draw_object(rng: np.random.Generator, name: str, directory: Path, tag_ids: l
     mass = float(np.clip(union_volume(lows, highs) * settings.density, *settings.mass_range))
     model = ObjectModel(name=name, directory=directory, mesh_file="mesh.stl", units="m", mass=round(mass, 3),
                         seed_resolution=float(settings.seed_resolution), parts=boxes, apriltags=tags)
-    if not np.allclose(default_grasp(model, sim.gripper.max_opening), grasp):
+    if not np.allclose(default_grasp(model, sim.gripper.geometry.max_opening), grasp):
         raise Rejected("the tags turn the default grasp away from the tagged +z side")
     hold = check_hold(model, sim, settings)
     return Draft(model, family, flipped, hold)

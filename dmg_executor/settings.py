@@ -11,6 +11,7 @@ from typing import Any, get_type_hints
 import numpy as np
 
 from dmg_common.config import parameter_defaults
+from dmg_common.gripper import load_gripper
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,8 @@ class LimitSettings:
 
 @dataclass(frozen=True)
 class GripperSettings:
-    """The pushing gripper's shape: round fingertips, fingers and the hand behind them (`gripper.*`)."""
+    """The pushing gripper's shape: round fingertips, fingers and the hand behind them (`gripper.*`); the tip
+    radius and finger length come from config/gripper.yaml, the description the planner and the sim share."""
 
     tip_radius: float
     finger_length: float
@@ -303,7 +305,10 @@ class ExecutorSettings:
     @classmethod
     def from_values(cls, values: dict[str, Any]) -> "ExecutorSettings":
         """From parameter values named as in config/executor.yaml (angles there in degrees; a group's
-        parameters are named `<group>.<field>`)."""
+        parameters are named `<group>.<field>`); the gripper's tip radius and finger length, unless given,
+        from config/gripper.yaml."""
+        gripper = load_gripper()
+        values = {"gripper.tip_radius": gripper.tip_radius, "gripper.finger_length": gripper.finger_length, **values}
         settings = cls(**{field.name: _group(_GROUPS[field.name], field.name, values) for field in fields(cls)})
         settings.validate()
         return settings

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 import open3d as o3d
@@ -34,7 +35,7 @@ from dmg_planner.supervoxels import vccs
 FORMAT_VERSION = 1
 # Bump when a code change alters the graphs built from the same input: it is part of the
 # cache key, so no planner serves a graph built by older code.
-ALGORITHM_VERSION = 4
+ALGORITHM_VERSION = 5
 
 
 class GraphError(ValueError):
@@ -169,9 +170,17 @@ def _references(normals: np.ndarray, components: np.ndarray) -> np.ndarray:
     return references
 
 
+class RayPart(IntEnum):
+    """Which part of the gripper a validity ray stands for (an invalid grasp names the part that hits)."""
+
+    FINGER = 0
+    PALM = 1
+
+
 def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndarray,
-                 p: GraphParameters) -> tuple[np.ndarray, np.ndarray]:
-    """Rays that sweep the finger's volume: ((S, A, K, 6) origin + unit direction, (K,) lengths).
+                 p: GraphParameters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays that sweep the finger's and the palm's volume: ((S, A, K, 6) origin + unit direction, (K,)
+    lengths, (K,) RayPart).
 
     The finger is a box: from `finger_tip_overhang` before the contact (the round fingertip
     reaches that far past it, away from the palm) along direction d to length l, across the tangent
@@ -181,6 +190,12 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
     on the layer nearest the surface, never further apart than `ray_spacing`: anything
     rising from the surface into the finger is hit unless it is thinner than that spacing
     in both directions (a pin), and so is anything entering through the box's sides.
+
+    The palm's face stands across d at l (the finger's base), `palm_width` wide, and reaches from the
+    finger across the grasp towards the other finger: rays along -n at l from the finger's lowest layer,
+    `max_opening` long, every `ray_spacing` across its width. An object reaching the palm between the
+    fingers (a face running on past the finger's length, a part rising towards the palm) is hit. A
+    `palm_width` of 0 leaves the palm out (the paper's test).
     """
     clearance = p.voxel_resolution
     lateral = np.linspace(-p.finger_width / 2, p.finger_width / 2,
@@ -203,21 +218,37 @@ def _finger_rays(positions: np.ndarray, normals: np.ndarray, references: np.ndar
     across_s = np.concatenate([np.repeat([-overhang, p.finger_length], len(heights)), stations[1:-1]])
     across_h = np.concatenate([np.tile(heights, 2), np.full(len(stations) - 2, heights[0])])
     across = base + across_s[:, None] * d[:, :, None, :] - (p.finger_width / 2) * side + across_h[:, None] * n
-    origins = np.concatenate([along, across], axis=2)
-    directions = np.concatenate([np.broadcast_to(d[:, :, None, :], along.shape), np.broadcast_to(side, across.shape)], axis=2)
-    lengths = np.concatenate([np.full(along.shape[2], reach), np.full(across.shape[2], p.finger_width)])
-    return np.concatenate([origins, directions], axis=-1), lengths
+    palm_u = np.linspace(-p.palm_width / 2, p.palm_width / 2, max(2, int(np.ceil(p.palm_width / p.ray_spacing)) + 1)) \
+        if p.palm_width > 0 else np.zeros(0)   # 0: the paper's test, the finger alone
+    palm = base + p.finger_length * d[:, :, None, :] + palm_u[:, None] * side + clearance * n
+    origins = np.concatenate([along, across, np.broadcast_to(palm, (*d.shape[:2], len(palm_u), 3))], axis=2)
+    directions = np.concatenate([np.broadcast_to(d[:, :, None, :], along.shape), np.broadcast_to(side, across.shape),
+                                 np.broadcast_to(-n, (*d.shape[:2], len(palm_u), 3))], axis=2)
+    lengths = np.concatenate([np.full(along.shape[2], reach), np.full(across.shape[2], p.finger_width),
+                              np.full(len(palm_u), p.max_opening + clearance)])
+    parts = np.repeat([RayPart.FINGER, RayPart.PALM], [along.shape[2] + across.shape[2], len(palm_u)])
+    return np.concatenate([origins, directions], axis=-1), lengths, parts
+
+
+def gripper_hits(scene: o3d.t.geometry.RaycastingScene, positions: np.ndarray, normals: np.ndarray,
+                 references: np.ndarray, p: GraphParameters) -> np.ndarray:
+    """(S, A, 2) bool: does the object meet the finger ([..., FINGER]) or the palm ([..., PALM]) at each
+    vertex and finger angle."""
+    hits = np.zeros((len(positions), p.angle_count, len(RayPart)), bool)
+    if len(positions) == 0:
+        return hits
+    rays, lengths, parts = _finger_rays(positions, normals, references, p)
+    cast = scene.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6).astype(np.float32)), nthreads=0)
+    met = cast["t_hit"].numpy().reshape(rays.shape[:3]) <= lengths
+    for part in RayPart:
+        hits[:, :, part] = met[:, :, parts == part].any(axis=2)
+    return hits
 
 
 def admissible_angles(scene: o3d.t.geometry.RaycastingScene, positions: np.ndarray, normals: np.ndarray,
                       references: np.ndarray, p: GraphParameters) -> np.ndarray:
-    """(S, A) bool: which finger angles at each vertex leave the finger clear of the object."""
-    if len(positions) == 0:
-        return np.zeros((0, p.angle_count), bool)
-    rays, lengths = _finger_rays(positions, normals, references, p)
-    hits = scene.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6).astype(np.float32)), nthreads=0)
-    t_hit = hits["t_hit"].numpy().reshape(rays.shape[:3])
-    return ~np.any(t_hit <= lengths, axis=2)
+    """(S, A) bool: which finger angles at each vertex leave the finger and the palm clear of the object."""
+    return ~gripper_hits(scene, positions, normals, references, p).any(axis=2)
 
 
 def angular_runs(admissible: np.ndarray) -> np.ndarray:

@@ -1,9 +1,16 @@
 """The parameters of a DMG build: a light module (no open3d) so command lines can list them cheaply."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
+
+from dmg_common.gripper import gripper_description
+
+
+def _gripper(name: str):
+    """Default from the gripper's one description (config/gripper.yaml)."""
+    return field(default_factory=lambda: getattr(gripper_description(), name))
 
 
 @dataclass(frozen=True)
@@ -16,10 +23,12 @@ class GraphParameters:
     normal_importance: float = 1.0
     delta: float = 0.07
     angle_step_deg: float = 5.0
-    finger_length: float = 0.1
-    finger_width: float = 0.02
-    finger_thickness: float = 0.01
-    finger_tip_overhang: float = 0.008   # how far the fingertip reaches past the contact, away from the palm
+    finger_length: float = _gripper("finger_length")         # palm face to fingertip centre (paper's l: 0.1)
+    finger_width: float = _gripper("finger_width")           # across the finger, in the tangent plane
+    finger_thickness: float = _gripper("finger_thickness")   # along the contact normal
+    finger_tip_overhang: float = _gripper("tip_radius")      # the round tip reaches this far past the contact
+    palm_width: float = _gripper("palm_width")               # the palm's face across the finger, at its base; 0 = no palm
+    max_opening: float = _gripper("max_opening")             # widest grasp; the palm reaches this far across
     ray_spacing: float = 0.005   # largest gap between the rays that sweep the finger's volume
 
     def validate(self) -> None:

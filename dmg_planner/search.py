@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from dmg_planner.graph import DexterousManipulationGraph
+from dmg_planner.graph import DexterousManipulationGraph, RayPart, gripper_hits
 from dmg_planner.primitives import Primitive, primitives_from_path
 from dmg_planner.search_options import PlanStatus, SearchOptions
 
@@ -148,6 +148,7 @@ class GraspFault(IntEnum):
     PRINCIPAL_ANGLE_BLOCKED = 3
     NO_SECONDARY_VERTEX = 4
     SECONDARY_ANGLE_BLOCKED = 5
+    TOO_WIDE = 6
 
 
 @dataclass
@@ -218,6 +219,8 @@ def locate_grasps(graph: DexterousManipulationGraph, positions: np.ndarray, rota
     contact, hit = _cast(graph, positions - reach * axis, np.ascontiguousarray(axis))
     secondary, _ = secondary_contacts(graph, contact, axis)
     fault = np.where(hit, GraspFault.NONE, GraspFault.MISSES_OBJECT)
+    too_wide = np.linalg.norm(secondary - contact, axis=1) > graph.parameters.max_opening
+    fault = np.where((fault == GraspFault.NONE) & too_wide, GraspFault.TOO_WIDE, fault)
     # Both fingers' contacts in one query: principal rows first, then secondary rows.
     count = len(positions)
     vertices, nodes, angles, bad = _nodes_near(graph, np.vstack([contact, secondary]), np.vstack([-axis, axis]),
@@ -232,6 +235,21 @@ def locate_grasps(graph: DexterousManipulationGraph, positions: np.ndarray, rota
                       secondary_vertex, secondary_node)
 
 
+def _blocked_by(graph: DexterousManipulationGraph, contact: np.ndarray, outward: np.ndarray, direction: np.ndarray) -> str:
+    """Which part of the gripper meets the object for a finger touching `contact` (face normal `outward`)
+    and pointing towards the palm along `direction`: the reason an angle is not admissible."""
+    tangent = direction - (direction @ outward) * outward
+    if np.linalg.norm(tangent) < 1e-9:
+        return "the finger would point into the object"
+    hits = gripper_hits(graph.scene(), contact[None], outward[None], (tangent / np.linalg.norm(tangent))[None],
+                        graph.parameters)[0, 0]
+    p = graph.parameters
+    if hits[RayPart.PALM] and not hits[RayPart.FINGER]:
+        return (f"the palm would meet the object at this finger angle (the object reaches the finger's base, "
+                f"{p.finger_length * 1000:.0f} mm from the contact, between the fingers)")
+    return "the finger would collide with the object at this finger angle"
+
+
 def resolve_grasp(graph: DexterousManipulationGraph, pose: GripperPose, principal_finger: int, what: str) -> Grasp:
     """Contacts and DMG nodes of one gripper pose, or GraspError with the reason."""
     rotation = Rotation.from_quat(pose.quaternion).as_matrix()
@@ -244,15 +262,18 @@ def resolve_grasp(graph: DexterousManipulationGraph, pose: GripperPose, principa
         GraspFault.MISSES_OBJECT: f"{what} grasp axis through {np.round(pose.position, 4).tolist()} misses the object",
         GraspFault.NO_PRINCIPAL_VERTEX: f"{what} principal contact {where['principal']} has no graph vertex within "
                                         f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
-        GraspFault.PRINCIPAL_ANGLE_BLOCKED: f"{what} principal finger at {where['principal']} would collide with "
-                                            f"the object at this finger angle",
+        GraspFault.PRINCIPAL_ANGLE_BLOCKED: lambda: f"{what} principal finger at {where['principal']}: "
+                                                    + _blocked_by(graph, contact, -batch.axis[0], batch.finger_direction[0]),
         GraspFault.NO_SECONDARY_VERTEX: f"{what} secondary contact {where['secondary']} has no graph vertex within "
                                         f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
-        GraspFault.SECONDARY_ANGLE_BLOCKED: f"{what} secondary finger at {where['secondary']} would collide with "
-                                            f"the object at this finger angle",
+        GraspFault.SECONDARY_ANGLE_BLOCKED: lambda: f"{what} secondary finger at {where['secondary']}: "
+                                                    + _blocked_by(graph, secondary, batch.axis[0], batch.finger_direction[0]),
+        GraspFault.TOO_WIDE: f"{what} grasp is {np.linalg.norm(secondary - contact) * 1000:.1f} mm wide between "
+                             f"{where['principal']} and {where['secondary']}; the gripper opens at most "
+                             f"{graph.parameters.max_opening * 1000:.0f} mm",
     }
     if fault != GraspFault.NONE:
-        raise GraspError(messages[fault])
+        raise GraspError(messages[fault]() if callable(messages[fault]) else messages[fault])
     width = float(np.linalg.norm(secondary - contact))
     tolerance = max(0.005, graph.parameters.seed_resolution / 2)
     if pose.opening > 0 and abs(pose.opening - width) > tolerance:
@@ -337,8 +358,8 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
     slot_ok = (table >= 0) & (graph.node_component[table.clip(min=0)] == secondary_component)
     admits = graph.node_angles[table.clip(min=0)[:, :, None], secondary_bins[:, None, :]]  # (K, R, A)
     secondary_ok = np.any(admits & slot_ok[:, :, None], axis=1) & ok_vertex[:, None]
-    valid = graph.node_angles[nodes] & secondary_ok
     openings = np.linalg.norm(secondaries - positions, axis=1)
+    valid = graph.node_angles[nodes] & secondary_ok & (openings <= p.max_opening)[:, None]
     middles = (positions + secondaries) / 2
 
     size = len(nodes) * count

@@ -5,10 +5,12 @@ conversions can name them without loading it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
+
+from dmg_common.gripper import gripper_description
 
 # The costs a request may set (PlanRepositioning's SearchOptions, `dmg graph plan`); the rest is configuration.
 PENALTIES = ("rotation_penalty", "opening_change_penalty", "pull_penalty", "arm_collision_penalty", "unpushable_penalty")
@@ -36,7 +38,7 @@ class SearchOptions:
     arm_collision_penalty: float = 0.05
     merge_tolerance: float = 0.0        # 0 = half the graph's seed resolution
     unpushable_penalty: float = 10.0
-    pusher_tip_radius: float = 0.008    # m, the pushing gripper's fingertip (a sphere)
+    pusher_tip_radius: float = field(default_factory=lambda: gripper_description().tip_radius)   # m, config/gripper.yaml
     pusher_clearance: float = 0.002     # m a fingertip needs all round beside the face it pushes
 
     def validate(self) -> None:

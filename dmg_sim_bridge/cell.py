@@ -193,13 +193,13 @@ class Cell:
 
     def opening(self, role: str) -> float:
         """Distance between the fingertips' inner surfaces [m]."""
-        return float(np.sum(self.data.qpos[self.arms[role].finger_qpos]) - 2 * self.config.gripper.tip_radius)
+        return float(np.sum(self.data.qpos[self.arms[role].finger_qpos]) - 2 * self.config.gripper.geometry.tip_radius)
 
     def gripper_status(self, role: str) -> GripperStatus:
         arm = self._arm(role)
         spec = self.config.gripper
         target = float(np.mean(self.data.ctrl[arm.finger_actuators]))
-        return GripperStatus(self.opening(role), 2 * (target - spec.tip_radius),
+        return GripperStatus(self.opening(role), 2 * (target - spec.geometry.tip_radius),
                              float(self.model.actuator_forcerange[arm.finger_actuators[0], 1]),
                              float(np.mean(np.abs(self.data.actuator_force[arm.finger_actuators]))))
 
@@ -231,9 +231,9 @@ class Cell:
         opening, max_force = (float(v) for v in _finite([opening, max_force], "gripper command"))
         # A hair beyond the travel is the travel's end: an opening measured past it (fingers pressed apart
         # against their stop) and sent back as the command is no fault (sim: 0.1200x m, the object pushed out).
-        if not -OPENING_SLACK <= opening <= spec.max_opening + OPENING_SLACK:
-            raise CellError(f"opening {opening:.4f} m is outside [0, {spec.max_opening}] m")
-        opening = float(np.clip(opening, 0.0, spec.max_opening))
+        if not -OPENING_SLACK <= opening <= spec.geometry.max_opening + OPENING_SLACK:
+            raise CellError(f"opening {opening:.4f} m is outside [0, {spec.geometry.max_opening}] m")
+        opening = float(np.clip(opening, 0.0, spec.geometry.max_opening))
         if not 0.0 <= max_force <= spec.force_limit:
             raise CellError(f"max_force {max_force:.2f} N is outside [0, {spec.force_limit}] N (0 = default)")
         force = max_force or spec.max_force
@@ -352,7 +352,7 @@ class Cell:
 
     def _surface_along_grasp_axis(self, grasp: np.ndarray) -> tuple[float, float]:
         """Distances from the grasp origin to the object's surface along -x and +x, seen from outside."""
-        reach = self.config.gripper.max_opening
+        reach = self.config.gripper.geometry.max_opening
         found = []
         for sign in (-1.0, 1.0):
             axis = sign * grasp[:3, 0]
@@ -412,15 +412,15 @@ class Cell:
             self.stop(role)
         mujoco.mj_kinematics(model, data)
         if object_in_gripper is None:
-            object_in_gripper = default_grasp(self.object, self.config.gripper.max_opening)
+            object_in_gripper = default_grasp(self.object, self.config.gripper.geometry.max_opening)
         grasp = self.grasp_pose("arm1")
         self._set_object(grasp @ object_in_gripper)
         mujoco.mj_kinematics(model, data)
         low, high = self._surface_along_grasp_axis(grasp)
         width = low + high
-        if width > self.config.gripper.max_opening:
+        if width > self.config.gripper.geometry.max_opening:
             raise CellError(f"the object is {width * 1000:.1f} mm wide along the grasp axis at that pose; "
-                            f"the gripper opens {self.config.gripper.max_opening * 1000:.0f} mm")
+                            f"the gripper opens {self.config.gripper.geometry.max_opening * 1000:.0f} mm")
         centred = object_in_gripper.copy()
         centred[0, 3] += (low - high) / 2
         self._set_object(grasp @ centred)

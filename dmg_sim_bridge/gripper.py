@@ -9,16 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-# Half-size of a finger's (visual) box across the grasp axis and across the fingers [m]: it runs
-# from the palm to the tip sphere. Tools that check an object against the fingers use it too.
-FINGER_HALF_SECTION = (0.005, 0.007)
+from dmg_common.gripper import GripperDescription
 
 
 @dataclass(frozen=True)
 class GripperSpec:
-    finger_length: float = 0.075      # palm to fingertip centre [m] (Baxter standard finger)
-    tip_radius: float = 0.008         # hemispherical fingertip radius [m]
-    max_opening: float = 0.12         # largest distance between the two tips' inner surfaces [m]
+    geometry: GripperDescription      # config/gripper.yaml: fingers, tips, opening (shared with planner and executor)
     kp: float = 20000.0               # position gain [N/m]
     max_force: float = 15.0           # default force limit per finger [N]
     force_limit: float = 40.0         # largest force a command may ask for [N]
@@ -28,7 +24,7 @@ class GripperSpec:
 
     def joint_target(self, opening: float) -> float:
         """Finger joint value that puts the tips' inner surfaces `opening` apart."""
-        return opening / 2 + self.tip_radius
+        return opening / 2 + self.geometry.tip_radius
 
 
 @dataclass(frozen=True)
@@ -38,20 +34,23 @@ class GripperXml:
     equality: str
 
 
-def gripper_mjcf(prefix: str, spec: GripperSpec = GripperSpec(), body_attributes: str = "") -> GripperXml:
-    """The gripper's MJCF; its grasp frame is the site <prefix>_grasp (between the tip centres)."""
-    travel = spec.joint_target(spec.max_opening)
+def gripper_mjcf(prefix: str, spec: GripperSpec, body_attributes: str = "") -> GripperXml:
+    """The gripper's MJCF; its grasp frame is the site <prefix>_grasp (between the tip centres). Only the tips
+    collide: the finger boxes (palm to tip) are for the eye."""
+    shape = spec.geometry
+    travel = spec.joint_target(shape.max_opening)
     friction = " ".join(str(f) for f in spec.friction)
-    bodies = [f'<site name="{prefix}_grasp" pos="0 0 {spec.finger_length}"/>']
+    bodies = [f'<site name="{prefix}_grasp" pos="0 0 {shape.finger_length}"/>']
     for finger, sign in ((0, -1), (1, 1)):
         bodies.append(
             f'<body name="{prefix}_finger{finger}" {body_attributes}>'
-            f'<joint name="{prefix}_finger{finger}" type="slide" axis="{sign} 0 0" range="{spec.tip_radius} {travel}" '
+            f'<joint name="{prefix}_finger{finger}" type="slide" axis="{sign} 0 0" range="{shape.tip_radius} {travel}" '
             f'damping="5"/>'
-            f'<inertial pos="0 0 {spec.finger_length / 2}" mass="{spec.finger_mass}" diaginertia="1e-5 1e-5 1e-5"/>'
-            f'<geom type="box" pos="0 0 {spec.finger_length / 2}" size="{FINGER_HALF_SECTION[0]} {FINGER_HALF_SECTION[1]} {spec.finger_length / 2 - spec.tip_radius}" '
+            f'<inertial pos="0 0 {shape.finger_length / 2}" mass="{spec.finger_mass}" diaginertia="1e-5 1e-5 1e-5"/>'
+            f'<geom type="box" pos="0 0 {shape.finger_length / 2}" size="{shape.finger_thickness / 2} {shape.finger_width / 2} '
+            f'{shape.finger_length / 2 - shape.tip_radius}" '
             f'rgba="0.2 0.2 0.2 1" contype="0" conaffinity="0" group="2"/>'
-            f'<geom name="{prefix}_tip{finger}" type="sphere" pos="0 0 {spec.finger_length}" size="{spec.tip_radius}" '
+            f'<geom name="{prefix}_tip{finger}" type="sphere" pos="0 0 {shape.finger_length}" size="{shape.tip_radius}" '
             f'condim="6" friction="{friction}" solref="{spec.solref_timeconst} 1" rgba="0.1 0.1 0.1 1"/>'
             '</body>')
     actuators = "".join(

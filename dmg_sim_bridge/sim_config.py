@@ -9,6 +9,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from dmg_common.config import config_dir
+from dmg_common.gripper import GripperDescription, GripperDescriptionError, load_gripper
 from dmg_common.transforms import from_rotation
 from dmg_sim_bridge.gripper import GripperSpec
 
@@ -83,14 +84,22 @@ def _pose(entry: dict) -> np.ndarray:
     return from_rotation(Rotation.from_euler("xyz", entry["rpy_deg"], degrees=True).as_matrix(), entry["xyz"])
 
 
-def _section(document: dict, name: str, spec: type, path: Path) -> dict:
-    """Section `name` as keyword arguments of dataclass `spec`: a user's sim.yaml that lacks a
-    key without a default (an older copy) or misspells one is told which, not met with a TypeError."""
+def _gripper_description() -> GripperDescription:
+    try:
+        return load_gripper()
+    except GripperDescriptionError as error:
+        raise SimConfigError(str(error)) from None
+
+
+def _section(document: dict, name: str, spec: type, path: Path, elsewhere: frozenset[str] = frozenset()) -> dict:
+    """Section `name` as keyword arguments of dataclass `spec` (less its fields in `elsewhere`, which come
+    from another file): a user's sim.yaml that lacks a key without a default (an older copy) or misspells
+    one is told which, not met with a TypeError."""
     entry = document.get(name)
     if not isinstance(entry, dict):
         raise SimConfigError(f"{path}: section '{name}' is missing or not a mapping")
-    known = {f.name for f in fields(spec)}
-    required = {f.name for f in fields(spec) if f.default is MISSING and f.default_factory is MISSING}
+    known = {f.name for f in fields(spec)} - elsewhere
+    required = {f.name for f in fields(spec) if f.default is MISSING and f.default_factory is MISSING} - elsewhere
     missing, unknown = sorted(required - entry.keys()), sorted(entry.keys() - known)
     if missing or unknown:
         raise SimConfigError(f"{path}: section '{name}': " + "; ".join(
@@ -114,7 +123,11 @@ def load_sim_config(path: Path | None = None) -> SimConfig:
 
 
 def _sim_config(document: dict, path: Path) -> SimConfig:
-    gripper = _section(document, "gripper", GripperSpec, path)
+    shape = {f.name for f in fields(GripperDescription)} & set(document.get("gripper") or {})
+    if shape:
+        raise SimConfigError(f"{path}: section 'gripper': {', '.join(sorted(shape))} belong in config/gripper.yaml, "
+                             "the gripper's one description (planner, simulation and executor read it)")
+    gripper = _section(document, "gripper", GripperSpec, path, elsewhere=frozenset({"geometry"}))
     if "friction" in gripper:
         gripper["friction"] = tuple(gripper["friction"])
     arms = dict(document["arms"])
@@ -125,7 +138,7 @@ def _sim_config(document: dict, path: Path) -> SimConfig:
         raise SimConfigError(f"{path}: camera.arm must be one of {ARM_ROLES}, got {camera.arm!r}")
     tolerance = document["settle_tolerance"]
     return SimConfig(
-        document=document, gripper=GripperSpec(**gripper), control=ControlSpec(**_section(document, "control", ControlSpec, path)),
+        document=document, gripper=GripperSpec(geometry=_gripper_description(), **gripper), control=ControlSpec(**_section(document, "control", ControlSpec, path)),
         camera=camera, arms=arms, home={role: _pose(document["home"][role]) for role in ARM_ROLES},
         ik_seed=np.asarray(document["ik_seed"], float), wrist_roll_room={role: float(document["wrist_roll_room"][role]) for role in ARM_ROLES},
         object=str(document["object"]),

@@ -111,7 +111,7 @@ def test_tags_lie_on_exposed_faces_facing_out_and_the_camera_side_carries_one(ge
             assert solid(square - 0.0005 * normal).all(), f"{model.name} tag {tag.id} hangs over its face's edge"
             assert not solid(square + 0.0005 * normal).any(), f"{model.name} tag {tag.id} is covered or faces in"
         # The default grasp turns a tagged side to the wrist camera (gripper +y) and pinches within the opening.
-        pose = default_grasp(model, sim.gripper.max_opening)
+        pose = default_grasp(model, sim.gripper.geometry.max_opening)
         normals = [pose[:3, :3] @ tag_pose(tag)[0][:, 2] for tag in model.apriltags]
         towards_camera = [n for n in normals if n[1] > 0.99]
         assert towards_camera, f"{model.name}: no tag towards the camera in the default grasp"
@@ -120,9 +120,9 @@ def test_tags_lie_on_exposed_faces_facing_out_and_the_camera_side_carries_one(ge
         sizes = np.array([p.size for p in model.parts]) @ np.abs(pose[:3, :3]).T
         on_line = np.all(np.abs(centres[:, 1:]) < sizes[:, 1:] / 2, axis=1)
         width = (centres[on_line, 0] + sizes[on_line, 0] / 2).max() - (centres[on_line, 0] - sizes[on_line, 0] / 2).min()
-        assert width < sim.gripper.max_opening, f"{model.name}: default grasp {width * 1000:.0f} mm wide"
+        assert width < sim.gripper.geometry.max_opening, f"{model.name}: default grasp {width * 1000:.0f} mm wide"
         reach = -(centres[:, 2] - sizes[:, 2] / 2).min()
-        assert reach < sim.gripper.finger_length, f"{model.name}: reaches {reach * 1000:.0f} mm towards the palm"
+        assert reach < sim.gripper.geometry.finger_length, f"{model.name}: reaches {reach * 1000:.0f} mm towards the palm"
 
 
 def test_the_same_seed_writes_the_same_bytes_and_another_seed_other_ones(tmp_path):
@@ -199,7 +199,7 @@ def test_the_cli_refuses_bad_arguments_with_exit_2(tmp_path):
 def test_the_cli_logs_each_rejected_draw_with_its_reason(tmp_path):
     config = tmp_path / "config"
     config.mkdir()
-    for name in ("sim.yaml", "generator.yaml"):
+    for name in ("sim.yaml", "gripper.yaml", "generator.yaml"):
         (config / name).write_text((REPO / "config" / name).read_text())
     (config / "objects").symlink_to(REPO / "config" / "objects")
     document = yaml.safe_load((config / "generator.yaml").read_text())
@@ -255,7 +255,7 @@ def test_the_cell_holds_every_generated_object_and_the_camera_sees_its_front_tag
         for made in report.objects:
             result = cell.reset(made.name, restart_clock=True)
             model = load_object(made.name)
-            expected = default_grasp(model, cell.config.gripper.max_opening)
+            expected = default_grasp(model, cell.config.gripper.geometry.max_opening)
             _, turned = distance(expected, result.object_in_gripper)   # the cell centres it along the grasp axis
             assert turned < np.deg2rad(5.0), made.name
             assert np.all(np.abs(result.object_in_gripper[1:3, 3] - expected[1:3, 3]) < 0.005), made.name

@@ -47,8 +47,8 @@ def test_a_replayed_bag_gives_the_same_detections_from_the_same_images(tmp_path)
     try:
         processes.start_logged("sim_bridge", [DMG, "run", "dmg_sim_bridge", "sim_bridge_node", "--ros-args",
                                               "-p", "camera_rate:=10.0"])
-        perception = processes.start_logged("perception", [DMG, "run", "dmg_perception", "perception_node",
-                                                           "--ros-args", "-p", "use_sim_time:=true"])
+        processes.start_logged("perception", [DMG, "run", "dmg_perception", "perception_node",
+                                              "--ros-args", "-p", "use_sim_time:=true"])
         from geometry_msgs.msg import PoseWithCovarianceStamped
         poses = []
         watcher.node.create_subscription(PoseWithCovarianceStamped, "/perception/object_pose", poses.append, 10)

@@ -90,7 +90,7 @@ def test_object_pose_from_tags_matches_ground_truth_over_random_poses(cell, esti
     rng = np.random.default_rng(7)
     errors = []
     for name in object_names():
-        grasp = default_grasp(load_object(name), cell.config.gripper.max_opening)
+        grasp = default_grasp(load_object(name), cell.config.gripper.geometry.max_opening)
         for _ in range(8):
             turn = from_rotation(Rotation.from_euler("x", rng.uniform(-35, 35), degrees=True).as_matrix(),
                                  [0.0, *rng.uniform(-0.01, 0.01, 2)])

@@ -17,9 +17,14 @@ from scipy.spatial.transform import Rotation
 from conftest import sphere_mesh
 
 
+# The hand-worked geometry below is for the paper's finger (l = 100 mm, 20 x 10 mm section, no palm), not the
+# cell's gripper.
+PAPER_FINGER = dict(finger_length=0.1, finger_width=0.02, finger_thickness=0.01, palm_width=0.0)
+
+
 def build(name: str, **overrides):
     model = load_object(name)
-    parameters = GraphParameters(seed_resolution=model.seed_resolution, **overrides)
+    parameters = GraphParameters(seed_resolution=model.seed_resolution, **{**PAPER_FINGER, **overrides})
     return build_graph(model.load_shape(parameters.voxel_resolution), parameters)
 
 
@@ -331,3 +336,52 @@ def test_a_surface_curved_everywhere_is_an_error_naming_the_cause(tmp_path):
         build_graph(shape, parameters)
     loose = GraphParameters(delta=0.3)
     assert len(build_graph(shape, loose).node_vertex) > 0
+
+
+@pytest.fixture(scope="module")
+def held_box():
+    """The box with the cell's gripper (config/gripper.yaml): 75 mm fingers, a palm at their base."""
+    model = load_object("box")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution)
+    return build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+
+
+def test_the_palm_blocks_a_finger_exactly_where_the_object_reaches_its_base(held_box):
+    """On the box's +y face (100 mm along x), a finger pointing along -x has the palm at x - l: blocked where
+    that is still on the box (x - l > -50 mm), free where the box has ended; along +x the mirror image. No
+    claim within a ray spacing of the boundary."""
+    p = held_box.parameters
+    face = np.flatnonzero((np.abs(held_box.normals[:, 1] - 1) < 1e-6) & (held_box.vertex_component >= 0))
+    assert len(face) > 10
+    checked = {True: 0, False: 0}
+    for vertex in face:
+        x = held_box.positions[vertex, 0]
+        for sign in (-1.0, 1.0):
+            palm = x + sign * p.finger_length
+            if abs(abs(palm) - 0.05) < p.ray_spacing:
+                continue
+            expected = abs(palm) < 0.05
+            angle = held_box.angle_of(np.array([vertex]), np.array([[sign, 0.0, 0.0]]))[0]
+            assert held_box.admissible[vertex, held_box.angle_bin(angle)] == (not expected), (x, sign)
+            checked[expected] += 1
+    assert checked[True] > 3 and checked[False] > 3, checked
+
+
+def test_a_goal_the_palm_would_meet_is_invalid_and_says_so(held_box):
+    start = grasp_pose(held_box, [0.0, 0.03, 0.0], np.pi)
+    goal = GripperPose(start.position + np.array([0.044, 0.0, 0.0]), start.quaternion, start.opening)
+    result = plan(held_box, start, goal)
+    assert result.status == PlanStatus.INVALID_GOAL and "the palm would meet the object" in result.message
+    assert "75 mm from the contact" in result.message
+
+
+def test_a_grasp_wider_than_the_gripper_opens_is_invalid_and_the_search_keeps_within_it():
+    model = load_object("box")
+    parameters = GraphParameters(seed_resolution=model.seed_resolution, max_opening=0.05)
+    narrow = build_graph(model.load_shape(parameters.voxel_resolution), parameters)
+    across_60 = grasp_pose(narrow, [0.0, 0.03, 0.0], np.pi)
+    result = plan(narrow, across_60, across_60)
+    assert result.status == PlanStatus.INVALID_START and "60.0 mm wide" in result.message
+    assert "opens at most 50 mm" in result.message
+    across_40 = grasp_pose(narrow, [-0.02, 0.0, 0.02], 0.0), grasp_pose(narrow, [0.03, 0.0, 0.02], 0.0)
+    assert plan(narrow, *across_40).success

@@ -23,7 +23,8 @@ def test_build_prints_counts_and_saves(built_box, dmg_in_process):
     result, saved = built_box
     assert result.returncode == 0, result.stderr
     stats = json.loads(result.stdout)
-    assert stats["dmg_components"] == 6 and stats["supervoxels"] == stats["dmg_nodes"] > 100
+    # One component per face; every vertex keeps a node (the palm splits a few angle sets near the ends in two).
+    assert stats["dmg_components"] == 6 and stats["dmg_nodes"] >= stats["supervoxels"] > 100
     assert set(stats["timings"]) == {"supervoxels", "graph", "finger_angles", "nodes"}
     assert stats["output"] == str(saved) and saved.is_file()
     text = dmg_in_process("graph", "build", "plug", "--seed-resolution", "0.008")

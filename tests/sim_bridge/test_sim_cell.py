@@ -107,7 +107,7 @@ def push_from_below(cell: Cell, lateral_offset: float, gap: float, travel: float
     closed fingertips, `lateral_offset` off the end's centre along the base y; tighten again.
     Returns (object in gripper 1 before, after)."""
     cell.reset(object_name="box", restart_clock=restart_clock)
-    tip_radius = cell.config.gripper.tip_radius
+    tip_radius = cell.config.gripper.geometry.tip_radius
     obj = cell.object_pose()
     lower_end = obj[:3, 3] + 0.05 * obj[:3, 0]          # the default grasp puts the box's x down
     assert lower_end[2] < obj[2, 3]
@@ -238,7 +238,7 @@ def test_a_gripper_command_a_hair_past_the_fingers_travel_is_its_end_one_further
     back as a command moves the fingers to the travel's end; a command clearly outside is refused
     with the range and changes nothing."""
     cell.reset(object_name="box")
-    travel = cell.config.gripper.max_opening
+    travel = cell.config.gripper.geometry.max_opening
     cell.command_gripper("arm2", travel + 0.0004, 10.0)
     assert cell.gripper_status("arm2").target_opening == pytest.approx(travel)
     cell.command_gripper("arm2", -0.0004, 10.0)
@@ -273,6 +273,7 @@ def test_camera_frames_of_a_run_are_saved_as_pngs_or_a_video(cell, tmp_path, tar
     (lambda d: d["control"].pop("position_weight"), "missing position_weight"),
     (lambda d: d["camera"].update(fxx=1.0), "unknown fxx"),
     (lambda d: d.pop("home"), "'home' is missing"),
+    (lambda d: d["gripper"].update(tip_radius=0.01), "tip_radius belong in config/gripper.yaml"),
 ])
 def test_a_sim_yaml_lacking_or_misspelling_a_key_is_refused_naming_it(tmp_path, edit, named):
     with pytest.raises(ValueError, match=named):
@@ -281,7 +282,7 @@ def test_a_sim_yaml_lacking_or_misspelling_a_key_is_refused_naming_it(tmp_path, 
 
 def test_a_sim_yaml_may_leave_out_a_gripper_key_that_has_a_default(tmp_path):
     path = _edited_sim_yaml(tmp_path, lambda d: d["gripper"].pop("kp"))
-    assert load_sim_config(path).gripper.kp == GripperSpec().kp
+    assert load_sim_config(path).gripper.kp == GripperSpec.__dataclass_fields__["kp"].default
 
 
 def _edited_sim_yaml(tmp_path, edit):

@@ -21,7 +21,7 @@ def held_box_scene(tmp_path, force: float):
     gripper = gripper_mjcf("g1", spec)
     model = load_object("box")
     friction = " ".join(map(str, spec.friction))
-    assets, body = object_mjcf(model, tmp_path / "textures", position=(0, 0, 0.5 - spec.finger_length),
+    assets, body = object_mjcf(model, tmp_path / "textures", position=(0, 0, 0.5 - spec.geometry.finger_length),
                                geom_defaults=f'condim="6" friction="{friction}"')
     # Hand pointing down, grasp axis along world y: the fingers pinch the box's 60 mm faces.
     x, y, z, w = Rotation.from_euler("xz", [180, 90], degrees=True).as_quat()
@@ -31,7 +31,7 @@ def held_box_scene(tmp_path, force: float):
     mj_model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(mj_model)
     for finger in ("g1_finger0", "g1_finger1"):
-        data.joint(finger).qpos = 0.03 + spec.tip_radius
+        data.joint(finger).qpos = 0.03 + spec.geometry.tip_radius
     data.ctrl[:] = 0.0   # target inside the object: each finger squeezes with its force limit
     mujoco.mj_forward(mj_model, data)
     return mj_model, data
@@ -120,7 +120,7 @@ def test_the_loosened_grip_the_executor_picks_keeps_a_heavy_block_held_off_centr
     surface = ObjectSurface.of(model)
     cell = Cell()
     try:
-        aside = from_rotation(np.eye(3), [0.0, 0.017, 0.0]) @ default_grasp(model, cell.config.gripper.max_opening)
+        aside = from_rotation(np.eye(3), [0.0, 0.017, 0.0]) @ default_grasp(model, cell.config.gripper.geometry.max_opening)
         turns = {}
         for margin in (0.5, settings.grip.turn_hold_margin):
             cell.reset("gen_5_0", object_in_gripper=aside)
