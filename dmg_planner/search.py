@@ -250,38 +250,54 @@ def _blocked_by(graph: DexterousManipulationGraph, contact: np.ndarray, outward:
     return "the finger would collide with the object at this finger angle"
 
 
+def resolve_grasps(graph: DexterousManipulationGraph, poses: list[GripperPose], principal_finger: int,
+                   names: list[str]) -> list[Grasp | GraspError]:
+    """Contacts and DMG nodes of gripper poses in one batch (a plan's start and goal share the ray casts
+    and the vertex lookups): per pose its Grasp, or the GraspError that says why it gives none."""
+    positions = np.array([pose.position for pose in poses], float)
+    rotations = Rotation.from_quat(np.array([pose.quaternion for pose in poses], float)).as_matrix()
+    batch = locate_grasps(graph, positions, rotations, principal_finger)
+    return [_grasp_or_error(graph, batch, k, pose, what, principal_finger)
+            for k, (pose, what) in enumerate(zip(poses, names))]
+
+
 def resolve_grasp(graph: DexterousManipulationGraph, pose: GripperPose, principal_finger: int, what: str) -> Grasp:
     """Contacts and DMG nodes of one gripper pose, or GraspError with the reason."""
-    rotation = Rotation.from_quat(pose.quaternion).as_matrix()
-    batch = locate_grasps(graph, np.asarray(pose.position, float)[None], rotation[None], principal_finger)
-    fault = GraspFault(int(batch.fault[0]))
-    contact, secondary = batch.contact[0], batch.secondary[0]
-    radius = max(graph.parameters.seed_resolution, 2 * graph.parameters.voxel_resolution) * 1000
-    where = {"principal": np.round(contact, 4).tolist(), "secondary": np.round(secondary, 4).tolist()}
-    messages = {
-        GraspFault.MISSES_OBJECT: f"{what} grasp axis through {np.round(pose.position, 4).tolist()} misses the object",
-        GraspFault.NO_PRINCIPAL_VERTEX: f"{what} principal contact {where['principal']} has no graph vertex within "
-                                        f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
-        GraspFault.PRINCIPAL_ANGLE_BLOCKED: lambda: f"{what} principal finger at {where['principal']}: "
-                                                    + _blocked_by(graph, contact, -batch.axis[0], batch.finger_direction[0]),
-        GraspFault.NO_SECONDARY_VERTEX: f"{what} secondary contact {where['secondary']} has no graph vertex within "
-                                        f"{radius:.1f} mm facing the finger (that surface was dropped from the graph)",
-        GraspFault.SECONDARY_ANGLE_BLOCKED: lambda: f"{what} secondary finger at {where['secondary']}: "
-                                                    + _blocked_by(graph, secondary, batch.axis[0], batch.finger_direction[0]),
-        GraspFault.TOO_WIDE: f"{what} grasp is {np.linalg.norm(secondary - contact) * 1000:.1f} mm wide between "
-                             f"{where['principal']} and {where['secondary']}; the gripper opens at most "
-                             f"{graph.parameters.max_opening * 1000:.0f} mm",
-    }
-    if fault != GraspFault.NONE:
-        raise GraspError(messages[fault]() if callable(messages[fault]) else messages[fault])
+    result = resolve_grasps(graph, [pose], principal_finger, [what])[0]
+    if isinstance(result, GraspError):
+        raise result
+    return result
+
+
+def _grasp_or_error(graph: DexterousManipulationGraph, batch: GraspBatch, k: int, pose: GripperPose, what: str,
+                    principal_finger: int) -> Grasp | GraspError:
+    fault = GraspFault(int(batch.fault[k]))
+    contact, secondary = batch.contact[k], batch.secondary[k]
     width = float(np.linalg.norm(secondary - contact))
+    radius = max(graph.parameters.seed_resolution, 2 * graph.parameters.voxel_resolution) * 1000
+    principal, other = np.round(contact, 4).tolist(), np.round(secondary, 4).tolist()
+    if fault == GraspFault.MISSES_OBJECT:
+        return GraspError(f"{what} grasp axis through {np.round(pose.position, 4).tolist()} misses the object")
+    if fault == GraspFault.TOO_WIDE:
+        return GraspError(f"{what} grasp is {width * 1000:.1f} mm wide between {principal} and {other}; the "
+                          f"gripper opens at most {graph.parameters.max_opening * 1000:.0f} mm")
+    if fault in (GraspFault.NO_PRINCIPAL_VERTEX, GraspFault.NO_SECONDARY_VERTEX):
+        which, where = ("principal", principal) if fault == GraspFault.NO_PRINCIPAL_VERTEX else ("secondary", other)
+        return GraspError(f"{what} {which} contact {where} has no graph vertex within {radius:.1f} mm facing the "
+                          "finger (that surface was dropped from the graph)")
+    if fault == GraspFault.PRINCIPAL_ANGLE_BLOCKED:
+        return GraspError(f"{what} principal finger at {principal}: "
+                          + _blocked_by(graph, contact, -batch.axis[k], batch.finger_direction[k]))
+    if fault == GraspFault.SECONDARY_ANGLE_BLOCKED:
+        return GraspError(f"{what} secondary finger at {other}: "
+                          + _blocked_by(graph, secondary, batch.axis[k], batch.finger_direction[k]))
     tolerance = max(0.005, graph.parameters.seed_resolution / 2)
     if pose.opening > 0 and abs(pose.opening - width) > tolerance:
-        raise GraspError(f"{what} opening {pose.opening * 1000:.1f} mm does not match the object's width "
-                         f"{width * 1000:.1f} mm along the grasp axis (tolerance {tolerance * 1000:.1f} mm)")
-    return Grasp(principal_finger, contact, secondary, batch.axis[0], batch.finger_direction[0],
-                 int(batch.vertex[0]), int(batch.node[0]), float(batch.angle[0]),
-                 int(batch.secondary_vertex[0]), int(batch.secondary_node[0]))
+        return GraspError(f"{what} opening {pose.opening * 1000:.1f} mm does not match the object's width "
+                          f"{width * 1000:.1f} mm along the grasp axis (tolerance {tolerance * 1000:.1f} mm)")
+    return Grasp(principal_finger, contact, secondary, batch.axis[k], batch.finger_direction[k],
+                 int(batch.vertex[k]), int(batch.node[k]), float(batch.angle[k]),
+                 int(batch.secondary_vertex[k]), int(batch.secondary_node[k]))
 
 
 @dataclass
@@ -459,14 +475,11 @@ def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPos
     fingers = (0, 1) if options.principal_finger < 0 else (options.principal_finger,)
     # One resolution serves both fingers: finger 1 leading is finger 0's grasp seen from the other side.
     first = fingers[0]
-    try:
-        s = resolve_grasp(graph, start, first, "start")
-    except GraspError as error:
-        return PlanResult(PlanStatus.INVALID_START, str(error), first, planning_time=time.perf_counter() - began)
-    try:
-        g = resolve_grasp(graph, goal, first, "goal")
-    except GraspError as error:
-        return PlanResult(PlanStatus.INVALID_GOAL, str(error), first, int(graph.node_component[s.node]), start=s,
+    s, g = resolve_grasps(graph, [start, goal], first, ["start", "goal"])
+    if isinstance(s, GraspError):
+        return PlanResult(PlanStatus.INVALID_START, str(s), first, planning_time=time.perf_counter() - began)
+    if isinstance(g, GraspError):
+        return PlanResult(PlanStatus.INVALID_GOAL, str(g), first, int(graph.node_component[s.node]), start=s,
                           planning_time=time.perf_counter() - began)
     results = [_plan_with(graph, s, g, options)]
     if len(fingers) == 2:
