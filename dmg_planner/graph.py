@@ -32,7 +32,7 @@ from dmg_planner.graph_parameters import GraphParameters
 from dmg_planner.shape import Shape
 from dmg_planner.supervoxels import vccs
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 # Bump when a code change alters the graphs built from the same input: it is part of the
 # cache key, so no planner serves a graph built by older code.
 ALGORITHM_VERSION = 5
@@ -58,6 +58,7 @@ class DexterousManipulationGraph:
     node_angles: np.ndarray       # (N, A) bool: the node's angle set
     node_component: np.ndarray    # (N,) C_DMG component
     node_edges: np.ndarray        # (M, 2) DMG edges, i < j
+    node_edge_shift: np.ndarray   # (M,) angle bins to add at node j for node i's finger direction (frames turn on curves)
     voxel_centers: np.ndarray     # (W, 3) voxels of the segmentation (for mapping points to vertices)
     voxel_labels: np.ndarray      # (W,) supervoxel (= vertex) of each voxel, -1 if none
     timings: dict[str, float] = field(default_factory=dict)
@@ -305,7 +306,8 @@ def build_graph(shape: Shape, parameters: GraphParameters) -> DexterousManipulat
     runs = angular_runs(admissible)
     node_vertex, node_run = _nodes(runs, components)
     node_angles = runs[node_vertex] == node_run[:, None]
-    node_edges = _node_edges(edges, node_vertex, node_run, node_angles, runs)
+    shifts = _edge_shifts(edges, references, np.cross(normals, references), parameters)
+    node_edges, node_edge_shift = _node_edges(edges, shifts, node_vertex, node_run, node_angles, runs)
     n = len(node_vertex)
     if n == 0:
         raise GraphError(_why_no_nodes(count, int(keep.sum()), int((~dead[alive]).sum()), parameters))
@@ -317,7 +319,7 @@ def build_graph(shape: Shape, parameters: GraphParameters) -> DexterousManipulat
         mesh_vertices=shape.vertices, mesh_triangles=shape.triangles,
         positions=positions, normals=normals, references=references, vertex_component=components,
         graph_edges=edges, admissible=admissible, node_vertex=node_vertex, node_angles=node_angles,
-        node_component=node_component, node_edges=node_edges,
+        node_component=node_component, node_edges=node_edges, node_edge_shift=node_edge_shift,
         voxel_centers=segmentation.voxels.centers, voxel_labels=segmentation.voxel_labels,
         timings=timings, supervoxel_count=count, graph_component_count=int(components.max(initial=-1) + 1))
 
@@ -354,18 +356,36 @@ def _nodes(runs: np.ndarray, components: np.ndarray) -> tuple[np.ndarray, np.nda
     return node_vertex, node_run
 
 
-def _node_edges(edges: np.ndarray, node_vertex: np.ndarray, node_run: np.ndarray,
-                node_angles: np.ndarray, runs: np.ndarray) -> np.ndarray:
-    """Join nodes of G-adjacent vertices whose angle sets intersect."""
+def _edge_shifts(edges: np.ndarray, references: np.ndarray, bitangents: np.ndarray, p: GraphParameters) -> np.ndarray:
+    """Per edge (i, j) of G: how many angle bins to add to an angle at i to name the same finger direction at
+    j (i's angle-0 axis seen in j's tangent frame). Finger angles are measured in each vertex's own frame;
+    across a flat face the frames agree (0), on a curved surface they may turn, so angles are compared as
+    directions."""
+    e1 = references[edges[:, 0]]
+    turn = np.arctan2(np.einsum("ij,ij->i", e1, bitangents[edges[:, 1]]),
+                      np.einsum("ij,ij->i", e1, references[edges[:, 1]]))
+    return np.round(turn / p.angle_step).astype(int) % p.angle_count
+
+
+def _node_edges(edges: np.ndarray, shifts: np.ndarray, node_vertex: np.ndarray, node_run: np.ndarray,
+                node_angles: np.ndarray, runs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Join nodes of G-adjacent vertices whose angle sets intersect as finger directions: (M, 2) edges,
+    i < j, and each edge's bin shift from i's frame to j's."""
     first_node = np.searchsorted(node_vertex, np.arange(len(runs)))
     run_count = runs.max(axis=1) + 1
-    pairs = []
+    bins = np.arange(node_angles.shape[1])
+    pairs, pair_shifts = [], []
     for a in range(run_count.max(initial=0)):
         for b in range(run_count.max(initial=0)):
             has = (run_count[edges[:, 0]] > a) & (run_count[edges[:, 1]] > b)
             u = first_node[edges[has, 0]] + a
             v = first_node[edges[has, 1]] + b
-            meet = np.any(node_angles[u] & node_angles[v], axis=1)
+            seen_at_v = node_angles[v[:, None], (bins[None, :] + shifts[has, None]) % len(bins)]
+            meet = np.any(node_angles[u] & seen_at_v, axis=1)
             pairs.append(np.column_stack([u[meet], v[meet]]))
-    result = np.concatenate(pairs) if pairs else np.zeros((0, 2), int)
-    return np.sort(result, axis=1).reshape(-1, 2)
+            pair_shifts.append(shifts[has][meet])
+    if not pairs:
+        return np.zeros((0, 2), int), np.zeros(0, int)
+    result, shift = np.concatenate(pairs), np.concatenate(pair_shifts)
+    swapped = result[:, 0] > result[:, 1]
+    return np.sort(result, axis=1).reshape(-1, 2), np.where(swapped, -shift, shift) % len(bins)

@@ -380,13 +380,16 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
 
     size = len(nodes) * count
     rows, cols, costs = [], [], []
-    # Translations along DMG edges inside the component, both directions, same angle bin.
-    edges = graph.node_edges[np.isin(graph.node_edges[:, 0], nodes)]
+    # Translations along DMG edges inside the component, both directions, keeping the finger's direction (the
+    # same angle bin across a flat face; shifted where the two vertices' angle frames turn on a curve).
+    inside = np.isin(graph.node_edges[:, 0], nodes)
+    edges, shift = graph.node_edges[inside], graph.node_edge_shift[inside]
     u, v = np.searchsorted(nodes, edges[:, 0]), np.searchsorted(nodes, edges[:, 1])
     flat_directions = directions.reshape(-1, 3)
     # Both directions of an edge share the bins where both ends are valid.
-    edge_id, angle_bin = np.nonzero(valid[u] & valid[v])
-    for a, b in ((u, v), (v, u)):
+    edge_id, angle_bin = np.nonzero(valid[u] & valid[v[:, None], (np.arange(count)[None, :] + shift[:, None]) % count])
+    bin_u, bin_v = angle_bin, (angle_bin + np.take(shift, edge_id)) % count
+    for a, bin_a, b, bin_b in ((u, bin_u, v, bin_v), (v, bin_v, u, bin_u)):
         # Per-edge quantities first, then spread over the edge's bins (np.take: much faster
         # than fancy indexing at these sizes).
         edge_step = positions[b] - positions[a]
@@ -394,13 +397,13 @@ def _build_state_graph(graph: DexterousManipulationGraph, component: int, axis: 
         edge_opening = np.abs(openings[b] - openings[a])
         step = np.take(edge_step, edge_id, axis=0)
         length = np.take(edge_length, edge_id)
-        source = np.take(a, edge_id) * count + angle_bin
+        source = np.take(a, edge_id) * count + bin_a
         toward_palm = np.einsum("ij,ij->i", step, np.take(flat_directions, source, axis=0)) > PULL_COSINE * length
         # (a pull is pushed from the palm side, round gripper 1's fingers: pull_penalty says what it costs)
         unpushable = (~toward_palm & ~np.take(pushable(graph, middles[a], edge_step, options), edge_id)
                       if options.unpushable_penalty > 0 else np.zeros(len(edge_id), bool))
         rows.append(source)
-        cols.append(np.take(b, edge_id) * count + angle_bin)
+        cols.append(np.take(b, edge_id) * count + bin_b)
         costs.append(length * (1.0 + options.pull_penalty * toward_palm + options.unpushable_penalty * unpushable)
                      + ZERO_COST + options.opening_change_penalty * np.take(edge_opening, edge_id))
     # Rotations: enter layer 1, step one bin either way within the valid set, leave for free.

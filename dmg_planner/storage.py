@@ -20,7 +20,7 @@ from dmg_planner.graph import ALGORITHM_VERSION, FORMAT_VERSION, DexterousManipu
 
 ARRAYS = ("mesh_vertices", "mesh_triangles", "positions", "normals", "references", "vertex_component",
           "graph_edges", "admissible", "node_vertex", "node_angles", "node_component", "node_edges",
-          "voxel_centers", "voxel_labels")
+          "node_edge_shift", "voxel_centers", "voxel_labels")
 
 
 class GraphFileError(ValueError):

@@ -385,3 +385,20 @@ def test_a_grasp_wider_than_the_gripper_opens_is_invalid_and_the_search_keeps_wi
     assert "opens at most 50 mm" in result.message
     across_40 = grasp_pose(narrow, [-0.02, 0.0, 0.02], 0.0), grasp_pose(narrow, [0.03, 0.0, 0.02], 0.0)
     assert plan(narrow, *across_40).success
+
+
+def test_on_a_curved_surface_an_edge_keeps_the_finger_direction_not_the_angle_number(tmp_path):
+    """Each vertex measures finger angles in its own tangent frame; where neighbouring frames turn (a sphere,
+    delta loosened so it has edges) an edge joins angle k at i to angle k + shift at j, the bin of the same
+    finger direction seen in j's tangent plane (within a step: half of it rounding, the rest the planes' tilt)."""
+    parameters = GraphParameters(delta=0.3)
+    graph = build_graph(load_shape(sphere_mesh(tmp_path / "ball.stl"), "m", parameters.voxel_resolution), parameters)
+    assert np.count_nonzero(graph.node_edge_shift) > 0, "the frames do not turn: the test shows nothing"
+    bins = np.arange(parameters.angle_count)
+    for (i, j), shift in zip(graph.node_edges, graph.node_edge_shift):
+        vi, vj = graph.node_vertex[i], graph.node_vertex[j]
+        at_i = graph.direction(np.full(len(bins), vi), bins * parameters.angle_step)
+        seen_at_j = graph.angle_of(np.full(len(bins), vj), at_i)
+        named_at_j = ((bins + shift) % parameters.angle_count) * parameters.angle_step
+        error = np.abs((seen_at_j - named_at_j + np.pi) % (2 * np.pi) - np.pi)
+        assert error.max() <= parameters.angle_step, (i, j, np.rad2deg(error.max()))
