@@ -109,8 +109,16 @@ class CellClient:
         return invert(transform_from_pose(self.latest["/ground_truth/object_in_arm1"].pose))
 
     def plan(self, object_id: str, start: np.ndarray, goal: np.ndarray, timeout: float = 60.0):
+        """The planner's answer; while it says NOT_READY (the object's graph still building) asked again
+        each second until `timeout`."""
         request = self.Plan.Request(object_id=object_id, start=pose_message(start), goal=pose_message(goal))
-        return self.call(self.planner, request, timeout, "/plan_repositioning")
+        deadline = time.monotonic() + timeout
+        response = self.call(self.planner, request, timeout, "/plan_repositioning")
+        while response.error_code == response.NOT_READY and "being built" in response.message \
+                and time.monotonic() < deadline:
+            self.spin_for(1.0)
+            response = self.call(self.planner, request, max(1.0, deadline - time.monotonic()), "/plan_repositioning")
+        return response
 
     def execute(self, plan, alpha: float, timeout: float):
         """Send the plan, wait for the result (the action's result message)."""

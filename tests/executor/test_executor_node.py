@@ -3,6 +3,7 @@ separate processes over real DDS; success is judged against the simulator's grou
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -64,8 +65,13 @@ class Operator(RosTestNode):
     def plan(self, start: np.ndarray, goal: np.ndarray):
         from dmg_common.ros.geometry_messages import pose_message
 
-        response = self.call(self.planner, self.Plan.Request(object_id="box", start=pose_message(start),
-                                                             goal=pose_message(goal)))
+        request = self.Plan.Request(object_id="box", start=pose_message(start), goal=pose_message(goal))
+        deadline = time.monotonic() + 120.0
+        response = self.call(self.planner, request)
+        while response.error_code == response.NOT_READY and "being built" in response.message \
+                and time.monotonic() < deadline:
+            self.spin(1.0)                    # the graph is still being built (on a loaded machine): retry, as asked
+            response = self.call(self.planner, request)
         assert response.success, response.message
         return response.plan
 
