@@ -73,8 +73,8 @@ class EstimatorSettings:
 
     inlier_threshold: float        # px RMS
     pixel_noise: float             # px
-    prior_turn: float              # rad
-    held_tilt: float               # rad
+    prior_turn: float              # rad: the least rotation uncertainty of a last pose that settles a mirror
+    held_tilt: float               # rad: a mirror this much less square in the grip is not the held object (0: off)
 
     @classmethod
     def from_values(cls, values: dict) -> EstimatorSettings:
@@ -88,11 +88,7 @@ class EstimatorSettings:
 
 class ObjectPoseEstimator:
     def __init__(self, objects: list[ObjectModel], settings: EstimatorSettings | None = None):
-        settings = settings or EstimatorSettings.defaults()
-        self.inlier_threshold = settings.inlier_threshold
-        self.pixel_noise = settings.pixel_noise
-        self.prior_turn = settings.prior_turn     # rad: the least rotation uncertainty of a last pose that settles a mirror
-        self.held_tilt = settings.held_tilt       # rad: a mirror this much less square in the grip is not the held object (0: off)
+        self.settings = settings or EstimatorSettings.defaults()
         self.detector = detector()
         self.models = {model.name: model for model in objects}
         self.held_shapes: dict[str, HeldShape | None] = {}     # built when first needed (None: its mesh unreadable)
@@ -165,7 +161,7 @@ class ObjectPoseEstimator:
             for camera_from_tag in observation.candidates or self._tag_candidates(observation):
                 candidate = camera_from_tag @ invert(object_from_tag)
                 errors = self._errors(candidate, mine, layout)
-                inliers = errors < self.inlier_threshold
+                inliers = errors < self.settings.inlier_threshold
                 proposals.append((int(inliers.sum()), float(errors[inliers].sum()), candidate))
         most = max(count for count, _, _ in proposals)
         explaining = [proposal for proposal in proposals if proposal[0] == most]
@@ -179,19 +175,19 @@ class ObjectPoseEstimator:
             best = min(alike, key=lambda proposal: distance(to_frame @ proposal[2], prior)[1])
         chosen = best[2]
         errors = self._errors(chosen, mine, layout)
-        inliers = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
+        inliers = [o for o, e in zip(mine, errors) if e < self.settings.inlier_threshold]
         if not inliers:
             return None
         points = np.concatenate([layout[o.id] for o in inliers])
         pixels = np.concatenate([o.corners for o in inliers])
         camera_from_object = self._refine(chosen, points, pixels)
         if held and (self._off_square(object_name, to_frame @ camera_from_object)
-                     > self._off_square(object_name, to_frame @ chosen) + self.held_tilt):
+                     > self._off_square(object_name, to_frame @ chosen) + self.settings.held_tilt):
             camera_from_object = chosen     # (refined from a lone tag's pose, it slid into the mirror's minimum)
         errors = self._errors(camera_from_object, mine, layout)
         for observation, error in zip(mine, errors):
             observation.reprojection_error = float(error)
-        used = [o for o, e in zip(mine, errors) if e < self.inlier_threshold]
+        used = [o for o, e in zip(mine, errors) if e < self.settings.inlier_threshold]
         residual = self._residuals(camera_from_object, points, pixels)
         rms = float(np.sqrt(np.mean(residual**2)))
         noise2 = self._noise2(residual)
@@ -211,11 +207,11 @@ class ObjectPoseEstimator:
         """The proposals (camera_from_object last) that hold the object within `held_tilt` as squarely in the
         gripper as the squarest of them (all of them without a usable mesh, or with the check off)."""
         off = np.array([self._off_square(object_name, to_frame @ proposal[2]) for proposal in proposals])
-        return [proposal for proposal, tilt in zip(proposals, off) if tilt <= off.min() + self.held_tilt]
+        return [proposal for proposal, tilt in zip(proposals, off) if tilt <= off.min() + self.settings.held_tilt]
 
     def _off_square(self, object_name: str, object_in_gripper: np.ndarray) -> float:
         """rad off square in the holding gripper (held.py); 0 with the check off or no usable mesh."""
-        if self.held_tilt <= 0.0:
+        if self.settings.held_tilt <= 0.0:
             return 0.0
         if object_name not in self.held_shapes:
             try:
@@ -253,7 +249,7 @@ class ObjectPoseEstimator:
 
     def _noise2(self, residual: np.ndarray) -> float:
         """The corners' noise variance [px^2]: the residual's, at least `pixel_noise` squared."""
-        return max(float(residual @ residual) / max(residual.size - 6, 1), self.pixel_noise**2)
+        return max(float(residual @ residual) / max(residual.size - 6, 1), self.settings.pixel_noise**2)
 
     def _rival_weight(self, chosen: np.ndarray, rival: np.ndarray, misfit: float, noise2: float,
                       prior: np.ndarray | None, prior_covariance: np.ndarray | None) -> float:
@@ -264,7 +260,7 @@ class ObjectPoseEstimator:
         by more than their noise, weighs nothing."""
         odds = -misfit / (2 * noise2)
         if prior is not None:
-            sigma = self.prior_turn
+            sigma = self.settings.prior_turn
             if prior_covariance is not None and np.all(np.isfinite(prior_covariance)):
                 sigma = max(sigma, float(np.sqrt(np.linalg.eigvalsh(prior_covariance[3:, 3:]).max())))
             chosen_turn, rival_turn = distance(chosen, prior)[1], distance(rival, prior)[1]
