@@ -72,11 +72,12 @@ def sample_poses(graph: DexterousManipulationGraph, spacing: float, angle_count:
 
 
 def manipulability_matrix(graph: DexterousManipulationGraph, spacing: float = 0.0, angle_count: int = 8,
-                          principal_finger: int = 0, options: SearchOptions = SearchOptions()) -> ManipulabilityMatrix:
+                          principal_finger: int = 0, options: SearchOptions | None = None) -> ManipulabilityMatrix:
     """Sample poses, drop invalid ones, and compute all-pairs reachability in blocks.
 
     spacing 0 = the graph's seed resolution.
     """
+    options = options or SearchOptions()
     timings: dict[str, float] = {}
     began = time.perf_counter()
     positions, rotations = sample_poses(graph, spacing or graph.parameters.seed_resolution, angle_count)
@@ -165,10 +166,11 @@ class RegraspHint:
 
 
 def regrasp_hint(graph: DexterousManipulationGraph, matrix: ManipulabilityMatrix, current: np.ndarray,
-                 goal: GripperPose, options: SearchOptions = SearchOptions()) -> RegraspHint | None:
+                 goal: GripperPose, options: SearchOptions | None = None) -> RegraspHint | None:
     """The block of the manipulability matrix from which `goal` is reachable, and its pose nearest
     to the `current` grasp (4x4, object frame; see ManipulabilityMatrix.nearness). None when no
     sampled pose reaches the goal."""
+    options = options or SearchOptions()
     try:
         goal_component = int(graph.node_component[resolve_grasp(graph, goal, 0, "goal").node])
     except GraspError:

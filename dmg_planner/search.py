@@ -466,9 +466,11 @@ def pushable(graph: DexterousManipulationGraph, middles: np.ndarray, steps: np.n
 
 
 def plan(graph: DexterousManipulationGraph, start: GripperPose, goal: GripperPose,
-         options: SearchOptions = SearchOptions()) -> PlanResult:
-    """Plan from `start` to `goal`; failures come back as a PlanResult with a status, never raised."""
+         options: SearchOptions | None = None) -> PlanResult:
+    """Plan from `start` to `goal` (default options: the configured gripper's); failures come back as a
+    PlanResult with a status, never raised."""
     began = time.perf_counter()
+    options = options or SearchOptions()
     try:
         options.validate()
         start.validate("start")
