@@ -6,13 +6,15 @@ import sys
 from collections.abc import Callable
 
 from dmg_common.environment import apply_ros_environment
+from dmg_common.gripper import GripperDescriptionError
 
 
 def run_node(prog: str, description: str, epilog: str, argv: list[str] | None, make_node: Callable,
              startup_errors: tuple[type[Exception], ...] = ()) -> int:
     """Run a node until Ctrl-C/SIGTERM. `make_node()` builds it after rclpy.init; the node's
-    `shutdown()` runs before it is destroyed. A startup error of the listed types, or a parameter
-    rclpy refuses (wrong type, out of range), exits 1 with its message instead of a traceback."""
+    `shutdown()` runs before it is destroyed. A startup error of the listed types, a parameter
+    rclpy refuses (wrong type, out of range) or a missing or broken config/gripper.yaml exits 1 with its
+    message instead of a traceback."""
     argv = sys.argv[1:] if argv is None else argv
     own = argv[: argv.index("--ros-args")] if "--ros-args" in argv else argv
     argparse.ArgumentParser(prog=prog, description=description, epilog=epilog,
@@ -25,7 +27,7 @@ def run_node(prog: str, description: str, epilog: str, argv: list[str] | None, m
     rclpy.init(args=[prog, *argv])
     try:
         node = make_node()
-    except (*startup_errors, ParameterException) as error:
+    except (*startup_errors, ParameterException, GripperDescriptionError) as error:
         hint = (" (a floating-point parameter needs a decimal point: 30.0, not 30)"
                 if isinstance(error, InvalidParameterTypeException) else "")
         print(f"{prog}: cannot start: {error}{hint}", file=sys.stderr)

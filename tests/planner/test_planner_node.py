@@ -319,3 +319,20 @@ def test_restart_loads_graphs_from_the_cache(tmp_path):
         assert "1 of 1 objects ready at start (1 from cache)" in lines[-1]
     finally:
         processes.stop_all()
+
+
+def test_a_configuration_without_the_gripper_description_stops_the_node_with_the_reason(tmp_path):
+    """A copy of config/ from before config/gripper.yaml existed: exit 1 naming the file, no traceback."""
+    import os
+    import shutil
+
+    from conftest import REPO
+
+    config = tmp_path / "config"
+    shutil.copytree(REPO / "config", config)
+    (config / "gripper.yaml").unlink()
+    result = subprocess.run([DMG, "run", "dmg_planner", "planner_node"], capture_output=True, text=True, timeout=60,
+                            env={**os.environ, "DMG_CONFIG_DIR": str(config)})
+    assert result.returncode == 1, result.stderr
+    assert f"planner_node: cannot start: {config / 'gripper.yaml'}: cannot be read" in result.stderr
+    assert "Traceback" not in result.stderr
